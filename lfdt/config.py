@@ -1,0 +1,286 @@
+"""Typed, validated schema of ``params.yaml``.
+
+Every stage loads the file through :func:`load_params` before any compute: an unknown key,
+a wrong type or an impossible value raises :class:`ParamsError` naming the key and the value.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+PosFloat = Annotated[float, Field(gt=0)]
+NonNegFloat = Annotated[float, Field(ge=0)]
+PosInt = Annotated[int, Field(gt=0)]
+Fraction = Annotated[float, Field(gt=0, lt=1)]
+XY = Annotated[list[float], Field(min_length=2, max_length=2)]
+PosXY = Annotated[list[PosFloat], Field(min_length=2, max_length=2)]
+
+
+class Strict(BaseModel):
+    """Base: unknown keys are errors, field docstrings become descriptions."""
+
+    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True, frozen=True, strict=True)
+
+
+class ArmConfig(Strict):
+    """A planar serial arm: links, motors and passive joint dynamics."""
+
+    links: list[PosFloat] = Field(min_length=2, max_length=6)
+    """Link lengths from base to tip, m."""
+    gears: list[PosFloat]
+    """Motor gear per joint: torque (N m) at a command of 1."""
+    damping: list[PosFloat]
+    """Viscous joint damping per joint, N m s/rad (sets the arm's top speed: gear / damping)."""
+    armature: NonNegFloat = 0.005
+    """Rotor inertia added to every joint, kg m^2."""
+    joint_range: list[PosFloat]
+    """Symmetric joint limit per joint, rad."""
+    radius: PosFloat = 0.012
+    """Capsule radius of the links, m."""
+    tip_radius: PosFloat = 0.012
+    """Radius of the sphere at the end effector (the 'hand'), m."""
+
+    @model_validator(mode="after")
+    def _lengths(self) -> ArmConfig:
+        n = len(self.links)
+        for name in ("gears", "damping", "joint_range"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} has {len(getattr(self, name))} entries but links has {n}")
+        return self
+
+
+class BoxConfig(Strict):
+    """The pushed box."""
+
+    size: PosXY = [0.12, 0.08]
+    """Width (x) and depth (y), m."""
+    mass: PosFloat = 0.3
+    """Mass, kg."""
+    slide_damping: PosFloat = 3.0
+    """Viscous damping of the planar slide joints, N s/m (makes the task quasi-static)."""
+    yaw_damping: PosFloat = 0.01
+    """Viscous damping of the yaw hinge, N m s/rad."""
+    start: XY = [0.0, 0.22]
+    """Mean start position of the box centre, m."""
+    goal: XY = [0.0, 0.34]
+    """Goal position of the box centre, m."""
+    start_noise_xy: NonNegFloat = 0.02
+    """Half-width of the uniform noise on the start position, m."""
+    start_noise_yaw: NonNegFloat = 0.25
+    """Half-width of the uniform noise on the start yaw, rad."""
+
+
+class SuccessConfig(Strict):
+    """Success: all three conditions at once."""
+
+    distance: PosFloat = 0.03
+    """Box centre within this distance of the goal, m."""
+    yaw: PosFloat = 0.15
+    """Absolute box yaw below this, rad."""
+    speed: PosFloat = 0.02
+    """Box speed below this (at rest), m/s."""
+
+
+class RewardConfig(Strict):
+    """Dense reward for the SAC experts: -w_box d_box - w_yaw |yaw| - w_contact sum d_ci - w_action |a|^2."""
+
+    w_box: NonNegFloat = 10.0
+    """Weight of the box-to-goal distance, 1/m."""
+    w_yaw: NonNegFloat = 2.0
+    """Weight of the absolute box yaw, 1/rad."""
+    w_contact: NonNegFloat = 5.0
+    """Weight of the end-effector-to-contact-point distances, 1/m."""
+    w_action: NonNegFloat = 0.01
+    """Weight of the squared action norm."""
+    success_bonus: NonNegFloat = 10.0
+    """Bonus on success (the episode then ends)."""
+
+
+class EnvConfig(Strict):
+    """The simulated 2D dual-arm box push (all three domains)."""
+
+    timestep: PosFloat = 0.005
+    """Physics time step, s."""
+    frame_skip: PosInt = 10
+    """Physics steps per control step (0.05 s at the defaults: 20 Hz control)."""
+    max_episode_steps: PosInt = 60
+    """Control steps before an episode is truncated."""
+    base_x: PosFloat = 0.15
+    """Arm bases stand at x = -base_x (slot 1) and +base_x (slot 2), y = 0, m."""
+    contact_x: PosFloat = 0.035
+    """Lateral offset of each arm's contact point on the box's rear face from the box centre, m."""
+    start_gap: NonNegFloat = 0.01
+    """Gap between end effector surface and box rear face in the start pose, m."""
+    joint_noise: NonNegFloat = 0.05
+    """Half-width of the uniform noise on the start joint angles, rad."""
+    friction: PosFloat = 0.5
+    """Sliding friction between arms and box."""
+    robot: ArmConfig = ArmConfig(
+        links=[0.15, 0.12, 0.10], gears=[1.2, 0.8, 0.4], damping=[1.0, 0.8, 0.5],
+        joint_range=[2.9, 2.9, 2.9])
+    """Robot1 and Robot2 (identical 3-link arms)."""
+    human: ArmConfig = ArmConfig(
+        links=[0.11, 0.09, 0.07, 0.06], gears=[2.0, 1.4, 0.9, 0.45], damping=[0.8, 0.6, 0.4, 0.2],
+        joint_range=[2.6, 2.6, 2.0, 1.5], armature=0.002, tip_radius=0.02)
+    """The human stand-in: 4 shorter links, stronger and faster motors, smaller joint ranges, a rounder hand."""
+    box: BoxConfig = BoxConfig()
+    """The pushed box."""
+    success: SuccessConfig = SuccessConfig()
+    """Success thresholds."""
+    reward: RewardConfig = RewardConfig()
+    """Expert reward."""
+
+
+class ExpertsConfig(Strict):
+    """SAC experts in domain X (one policy controls both arms of a pairing)."""
+
+    total_timesteps: PosInt = 150_000
+    """Environment steps of SAC training per pairing."""
+    n_envs: PosInt = 4
+    """Parallel environments (one gradient step per vectorised step: n_envs env steps per gradient step)."""
+    net_arch: list[PosInt] = Field(default=[256, 256], min_length=1)
+    """Hidden layers of the actor and of each critic."""
+    learning_rate: PosFloat = 3e-4
+    """Adam learning rate."""
+    batch_size: PosInt = 256
+    """Minibatch size of a gradient step."""
+    buffer_size: PosInt = 300_000
+    """Replay buffer capacity, transitions."""
+    learning_starts: Annotated[int, Field(ge=0)] = 5_000
+    """Environment steps of random actions before learning starts."""
+    gamma: Fraction = 0.97
+    """Discount factor."""
+    gradient_steps: PosInt = 1
+    """Gradient steps per vectorised environment step."""
+    checkpoint_every: PosInt = 25_000
+    """Environment steps between resumable checkpoints (model and replay buffer)."""
+    log_every: PosInt = 5_000
+    """Environment steps between learning-curve points sent to MLflow."""
+    eval_episodes: PosInt = 100
+    """Episodes with fresh seeds used to measure each expert's success rate."""
+    torch_threads: PosInt = 1
+    """Torch CPU threads (1 is fastest for these small networks and lets two stages share 2 cores)."""
+    seed: Annotated[int, Field(ge=0, le=9)] = 0
+    """Training seed."""
+
+
+class RandomConfig(Strict):
+    """Random-motion data: uniform torque commands, each held for a random number of control steps."""
+
+    transitions: PosInt = 400_000
+    """Transitions per domain (the paper: 0.4M per domain)."""
+    episode_steps: PosInt = 100
+    """Control steps per random-motion episode (episodes start from the task's start distribution)."""
+    hold_min: PosInt = 1
+    """Fewest control steps a random command is held."""
+    hold_max: PosInt = 5
+    """Most control steps a random command is held."""
+    amplitude: Annotated[float, Field(gt=0, le=1)] = 1.0
+    """Commands are uniform in [-amplitude, amplitude] per joint."""
+    threads: PosInt = 2
+    """Threads of the batched MuJoCo rollout."""
+    episodes_per_batch: PosInt = 250
+    """Episodes simulated per batched rollout call (bounds memory)."""
+    seed: Annotated[int, Field(ge=0, le=9)] = 0
+    """Collection seed."""
+
+    @model_validator(mode="after")
+    def _hold(self) -> RandomConfig:
+        if self.hold_min > self.hold_max:
+            raise ValueError(f"hold_min ({self.hold_min}) > hold_max ({self.hold_max})")
+        return self
+
+
+class DemosConfig(Strict):
+    """Expert demonstrations in domain X."""
+
+    per_pairing: PosInt = 200
+    """Successful demonstrations kept per pairing."""
+    max_attempts: PosInt = 2_000
+    """Give up (and fail the stage) after this many attempts per pairing."""
+    deterministic: bool = True
+    """Use the expert's mean action (True) or sample from it (False)."""
+    success_only: bool = True
+    """Keep only successful episodes (False keeps every attempt: for smoke runs with untrained experts)."""
+    seed: Annotated[int, Field(ge=0, le=9)] = 0
+    """Collection seed."""
+
+
+class Params(Strict):
+    """The whole params.yaml."""
+
+    env: EnvConfig = EnvConfig()
+    """The simulated task."""
+    experts: ExpertsConfig = ExpertsConfig()
+    """SAC experts."""
+    random: RandomConfig = RandomConfig()
+    """Random-motion collection."""
+    demos: DemosConfig = DemosConfig()
+    """Demonstration collection."""
+
+
+class ParamsError(ValueError):
+    """params.yaml failed validation; the message names each offending key and value."""
+
+
+def _format_errors(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        key = ".".join(str(p) for p in e["loc"] if p != "") or "(top level)"
+        value = e.get("input")
+        lines.append(f"  {key} = {value!r}: {e['msg']}")
+    return "invalid params:\n" + "\n".join(lines)
+
+
+def validate_params(raw: dict | None) -> Params:
+    """Validate a params dict; raises ParamsError naming every bad key and value."""
+    if raw is not None and not isinstance(raw, dict):
+        raise ParamsError(f"invalid params: the top level must be a mapping, got {type(raw).__name__}")
+    try:
+        return Params.model_validate(raw or {})
+    except ValidationError as err:
+        raise ParamsError(_format_errors(err)) from None
+
+
+def load_params(path: str | Path = "params.yaml") -> Params:
+    """Read and validate params.yaml."""
+    path = Path(path)
+    if not path.exists():
+        raise ParamsError(f"params file {path} does not exist")
+    try:
+        raw = read_yaml(path)
+    except yaml.YAMLError as err:
+        raise ParamsError(f"{path} is not valid YAML: {err}") from None
+    return validate_params(raw)
+
+
+def read_yaml(path: str | Path) -> dict:
+    """Read a YAML file into a dict (empty file -> {})."""
+    with open(path) as fh:
+        data = yaml.safe_load(fh)
+    return data or {}
+
+
+def _yaml_scalar(v: Any) -> str:
+    return yaml.safe_dump(v, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
+
+
+def render_defaults(model: type[BaseModel] = None, instance: BaseModel | None = None, indent: int = 0) -> str:
+    """params.yaml text of a config's defaults, every key commented with its field docstring."""
+    instance = instance if instance is not None else (model or Params)()
+    lines = []
+    pad = "  " * indent
+    for name, field in type(instance).model_fields.items():
+        value = getattr(instance, name)
+        doc = (field.description or "").replace("\n", " ")
+        if isinstance(value, BaseModel):
+            lines.append(f"{pad}# {doc}" if doc else "")
+            lines.append(f"{pad}{name}:")
+            lines.append(render_defaults(instance=value, indent=indent + 1))
+        else:
+            lines.append(f"{pad}{name}: {_yaml_scalar(value)}  # {doc}")
+    return "\n".join(line for line in lines if line != "")

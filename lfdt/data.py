@@ -1,0 +1,159 @@
+"""Parquet datasets of transitions, in LeRobot's conventions.
+
+One row per transition: ``episode_index``, ``frame_index``, ``timestamp`` (s since the episode
+started), the state columns (``state.<name>``), the action columns (``action.<name>``), the next
+state (``next_state.<name>``), and kind-specific extras. Column names come from
+:mod:`lfdt.layout`. Every field carries a ``description`` (and ``unit``) in its pyarrow metadata;
+the schema metadata key ``lfdt`` holds a JSON document with the kind, the domain, the layout, the
+environment parameters, the seed and whatever the writer adds.
+
+Files are written atomically (a temporary file, then ``os.replace``): a crash never leaves a
+half-written dataset under the final name.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from lfdt import layout
+
+META_KEY = b"lfdt"
+INDEX_COLUMNS = ("episode_index", "frame_index", "timestamp")
+
+
+def _unit(name: str) -> str:
+    q = name.split(".")[-1]
+    if q.startswith("dq"):
+        return "rad/s"
+    if q.startswith("q") or q == "yaw":
+        return "rad"
+    if q.startswith("tau"):
+        return "1 (normalised torque command in [-1, 1])"
+    return "m"
+
+
+def _describe(prefix: str, name: str) -> str:
+    arm, qty = name.split(".", 1)
+    who = "box" if arm == "box" else layout.ARM_TITLES[arm]
+    what = {"state.": "state at frame t", "next_state.": "state at frame t+1",
+            "action.": "robot action at frame t", "human_action.": "human stand-in's action at frame t "
+            "(diagnostics only: translation and BC must not read it)"}[prefix]
+    return f"{who} {qty}, {what}"
+
+
+def transitions_schema(state_cols: list[str], action_cols: list[str], human_action_cols: list[str] = (),
+                       extra: Mapping[str, tuple[pa.DataType, str]] | None = None,
+                       metadata: Mapping[str, Any] | None = None) -> pa.Schema:
+    """The pyarrow schema of a transitions table, with per-field descriptions and the lfdt metadata."""
+    fields = [
+        pa.field("episode_index", pa.int64(), metadata={"description": "episode number within this file, from 0"}),
+        pa.field("frame_index", pa.int64(), metadata={"description": "control step within the episode, from 0"}),
+        pa.field("timestamp", pa.float32(), metadata={"description": "time since the episode started", "unit": "s"}),
+    ]
+    for prefix, cols in ((layout.STATE_PREFIX, state_cols), (layout.ACTION_PREFIX, action_cols),
+                         (layout.HUMAN_ACTION_PREFIX, human_action_cols), (layout.NEXT_STATE_PREFIX, state_cols)):
+        fields += [pa.field(prefix + c, pa.float32(), metadata={"description": _describe(prefix, c), "unit": _unit(c)})
+                   for c in cols]
+    for name, (dtype, desc) in (extra or {}).items():
+        fields.append(pa.field(name, dtype, metadata={"description": desc}))
+    meta = {META_KEY: json.dumps(metadata or {}, default=str).encode()}
+    return pa.schema(fields, metadata=meta)
+
+
+def transitions_table(schema: pa.Schema, episode_index: np.ndarray, frame_index: np.ndarray, dt: float,
+                      states: np.ndarray, actions: np.ndarray, next_states: np.ndarray,
+                      human_actions: np.ndarray | None = None, extra: Mapping[str, np.ndarray] | None = None
+                      ) -> pa.Table:
+    """Assemble a table in ``schema``'s column order from arrays (rows = transitions)."""
+    cols: dict[str, np.ndarray] = {
+        "episode_index": np.asarray(episode_index, dtype=np.int64),
+        "frame_index": np.asarray(frame_index, dtype=np.int64),
+        "timestamp": (np.asarray(frame_index) * dt).astype(np.float32),
+    }
+    blocks = {layout.STATE_PREFIX: states, layout.ACTION_PREFIX: actions, layout.NEXT_STATE_PREFIX: next_states,
+              layout.HUMAN_ACTION_PREFIX: human_actions}
+    for prefix, arr in blocks.items():
+        names = [f.name for f in schema if f.name.startswith(prefix)]
+        if not names:
+            continue
+        arr = np.asarray(arr, dtype=np.float32)
+        if arr.ndim != 2 or arr.shape[1] != len(names):
+            raise ValueError(f"{prefix}* expects {len(names)} columns, got array of shape {arr.shape}")
+        cols.update({n: arr[:, i] for i, n in enumerate(names)})
+    cols.update(extra or {})
+    missing = [f.name for f in schema if f.name not in cols]
+    if missing:
+        raise ValueError(f"no data for columns {missing}")
+    return pa.Table.from_arrays([pa.array(cols[f.name], type=f.type) for f in schema], schema=schema)
+
+
+def write_table(table: pa.Table, path: str | Path) -> Path:
+    """Write a Parquet file atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    pq.write_table(table, tmp, compression="zstd")
+    os.replace(tmp, path)
+    return path
+
+
+def read_metadata(path: str | Path) -> dict:
+    """The lfdt metadata document of a Parquet file."""
+    schema = pq.read_schema(path)
+    raw = (schema.metadata or {}).get(META_KEY)
+    if raw is None:
+        raise ValueError(f"{path} has no lfdt metadata: not written by lfdt.data")
+    return json.loads(raw)
+
+
+def read_transitions(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """Read a transitions file (optionally only some columns) into a DataFrame."""
+    return pq.read_table(path, columns=columns).to_pandas()
+
+
+def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> list[str]:
+    """Full column names for short layout names under a prefix, checking that they exist."""
+    have = df.names if isinstance(df, pa.Schema) else list(df.columns)
+    full = [prefix + n for n in names]
+    missing = [c for c in full if c not in have]
+    if missing:
+        raise KeyError(f"missing columns {missing}")
+    return full
+
+
+def check_transitions(path: str | Path, kind: str, domain: str) -> dict:
+    """Validate a transitions file's schema against the layout; returns its metadata. Raises ValueError."""
+    schema = pq.read_schema(path)
+    meta = read_metadata(path)
+    problems = []
+    if meta.get("kind") != kind:
+        problems.append(f"kind is {meta.get('kind')!r}, expected {kind!r}")
+    if meta.get("domain") != domain:
+        problems.append(f"domain is {meta.get('domain')!r}, expected {domain!r}")
+    expected = list(INDEX_COLUMNS)
+    expected += [layout.STATE_PREFIX + c for c in layout.state_columns(domain)]
+    if kind == "random":
+        expected += [layout.ACTION_PREFIX + c for c in layout.action_columns(domain)]
+    else:
+        robot = layout.robot_arm(domain)
+        expected += [layout.ACTION_PREFIX + c for c in layout.arm_action_columns(robot)]
+        expected += [layout.HUMAN_ACTION_PREFIX + c for c in layout.arm_action_columns("h")]
+    expected += [layout.NEXT_STATE_PREFIX + c for c in layout.state_columns(domain)]
+    missing = [c for c in expected if c not in schema.names]
+    if missing:
+        problems.append(f"missing columns {missing}")
+    for f in schema:
+        if f.name in expected and not (f.metadata or {}).get(b"description"):
+            problems.append(f"column {f.name} has no description")
+    if problems:
+        raise ValueError(f"{path}: " + "; ".join(problems))
+    return meta

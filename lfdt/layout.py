@@ -1,0 +1,91 @@
+"""The one observation/action layout used by every environment, data file and stage.
+
+State vectors are the concatenation ``[slot-1 arm, slot-2 arm, object]``. Slot 1 is where
+Robot1 stands (left, x < 0), slot 2 where Robot2 stands (right). In domain X the human
+stand-in takes one slot: R1H = (Robot1, Human), HR2 = (Human, Robot2). Domain Y = (Robot1, Robot2).
+
+Every arm contributes, in this order, its joint angles ``q*`` (rad), joint velocities
+``dq*`` (rad/s) and end position ``ee_x, ee_y`` (m, world frame). The object (box)
+contributes ``x, y`` (m) and ``yaw`` (rad). Column names are ``<arm>.<quantity>``, e.g.
+``r1.q0``, ``h.ee_y``, ``box.yaw``; stages select groups by name through this module.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+Arm = Literal["r1", "r2", "h"]
+Domain = Literal["Y", "R1H", "HR2"]
+
+DOMAINS: tuple[str, ...] = ("Y", "R1H", "HR2")
+PAIRINGS: tuple[str, ...] = ("R1H", "HR2")
+
+ARM_JOINTS: dict[str, int] = {"r1": 3, "r2": 3, "h": 4}
+ARM_TITLES: dict[str, str] = {"r1": "Robot1", "r2": "Robot2", "h": "Human stand-in"}
+DOMAIN_ARMS: dict[str, tuple[str, str]] = {"Y": ("r1", "r2"), "R1H": ("r1", "h"), "HR2": ("h", "r2")}
+OBJECT_COLUMNS: tuple[str, ...] = ("box.x", "box.y", "box.yaw")
+
+STATE_PREFIX = "state."
+NEXT_STATE_PREFIX = "next_state."
+ACTION_PREFIX = "action."
+HUMAN_ACTION_PREFIX = "human_action."
+
+
+def arm_columns(arm: str) -> list[str]:
+    """State column names of one arm: joint angles, joint velocities, end position."""
+    n = ARM_JOINTS[arm]
+    return [f"{arm}.q{i}" for i in range(n)] + [f"{arm}.dq{i}" for i in range(n)] + [f"{arm}.ee_x", f"{arm}.ee_y"]
+
+
+def arm_action_columns(arm: str) -> list[str]:
+    """Action column names of one arm: one normalised torque command per joint."""
+    return [f"{arm}.tau{i}" for i in range(ARM_JOINTS[arm])]
+
+
+def state_columns(domain: str) -> list[str]:
+    """State column names of a domain, in observation-vector order."""
+    a1, a2 = DOMAIN_ARMS[domain]
+    return arm_columns(a1) + arm_columns(a2) + list(OBJECT_COLUMNS)
+
+
+def action_columns(domain: str) -> list[str]:
+    """Action column names of a domain, in action-vector order (both slots)."""
+    a1, a2 = DOMAIN_ARMS[domain]
+    return arm_action_columns(a1) + arm_action_columns(a2)
+
+
+def robot_arm(pairing: str) -> str:
+    """The robot that is really there in a pairing of domain X ('r1' for R1H, 'r2' for HR2)."""
+    if pairing not in PAIRINGS:
+        raise ValueError(f"unknown pairing {pairing!r}; expected one of {PAIRINGS}")
+    return "r1" if pairing == "R1H" else "r2"
+
+
+def groups(domain: str) -> dict[str, list[str]]:
+    """Named column groups of a domain: the paper's x^H, x^Ri, x^O (X) or y^R1, y^R2, y^O (Y)."""
+    if domain == "Y":
+        return {"y^R1": arm_columns("r1"), "y^R2": arm_columns("r2"), "y^O": list(OBJECT_COLUMNS)}
+    ri = robot_arm(domain)
+    return {"x^H": arm_columns("h"), f"x^R{ri[1]}": arm_columns(ri), "x^O": list(OBJECT_COLUMNS)}
+
+
+def indices(domain: str, columns: list[str]) -> list[int]:
+    """Positions of named state columns in a domain's observation vector."""
+    cols = state_columns(domain)
+    missing = [c for c in columns if c not in cols]
+    if missing:
+        raise KeyError(f"columns {missing} are not in domain {domain}'s state {cols}")
+    return [cols.index(c) for c in columns]
+
+
+def describe() -> dict:
+    """The whole layout as a JSON-serialisable dict (stored in every Parquet file's metadata)."""
+    return {
+        "slots": "state = [slot-1 arm, slot-2 arm, object]; slot 1 is Robot1's place (left), slot 2 Robot2's",
+        "domains": {d: {"arms": list(DOMAIN_ARMS[d]), "state": state_columns(d), "action": action_columns(d),
+                        "groups": groups(d)} for d in DOMAINS},
+        "units": {"q": "rad", "dq": "rad/s", "ee_x/ee_y/box.x/box.y": "m, world frame", "box.yaw": "rad",
+                  "tau": "normalised torque command in [-1, 1] (times the actuator gear gives N m)"},
+        "prefixes": {"state": STATE_PREFIX, "next_state": NEXT_STATE_PREFIX, "action": ACTION_PREFIX,
+                     "human_action": HUMAN_ACTION_PREFIX},
+    }

@@ -1,0 +1,111 @@
+"""Random-motion data: batched MuJoCo rollouts of random torque commands.
+
+The distribution: each episode starts from the task's start distribution (the same as the
+experts'), then every joint receives a command drawn uniformly from [-amplitude, amplitude],
+held for a number of control steps drawn uniformly from {hold_min, ..., hold_max} (independently
+per episode and per hold). Holding a command lets the heavily damped arms actually travel, so the
+data covers the workspace and the box gets pushed, not only jittered.
+
+Simulation goes through ``mujoco.rollout`` on all threads: the controls of a whole batch of
+episodes are drawn first (open loop), then MuJoCo steps them in C. The resulting states are the
+same as stepping :class:`lfdt.envs.BoxPushEnv` (``tests/test_random_motion.py``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import mujoco
+import mujoco.rollout
+import numpy as np
+import pyarrow as pa
+
+from lfdt import data, layout
+from lfdt.config import EnvConfig, RandomConfig
+from lfdt.envs import BoxPushModel
+from lfdt.seeding import episode_seed
+
+
+def random_commands(rng: np.random.Generator, steps: int, act_dim: int, cfg: RandomConfig) -> np.ndarray:
+    """A (steps, act_dim) sequence of held uniform commands."""
+    out = np.empty((steps, act_dim))
+    t = 0
+    while t < steps:
+        hold = int(rng.integers(cfg.hold_min, cfg.hold_max + 1))
+        out[t:t + hold] = rng.uniform(-cfg.amplitude, cfg.amplitude, size=act_dim)
+        t += hold
+    return out
+
+
+def initial_physics_state(scene: BoxPushModel, data_: mujoco.MjData, qpos: np.ndarray) -> np.ndarray:
+    """The full physics state vector of a configuration at rest."""
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    mujoco.mj_resetData(scene.model, data_)
+    data_.qpos[:] = qpos
+    mujoco.mj_forward(scene.model, data_)
+    state = np.empty(mujoco.mj_stateSize(scene.model, spec))
+    mujoco.mj_getState(scene.model, data_, state, spec)
+    return state
+
+
+def rollout_episodes(scene: BoxPushModel, qpos0: np.ndarray, actions: np.ndarray, threads: int = 1
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate episodes open loop. qpos0 (B, nq), actions (B, T, nu) -> states (B, T+1, obs_dim) and qvel.
+
+    Returns the observation sequence (including the start) and the box speed after each step.
+    """
+    model = scene.model
+    nbatch, steps, _ = actions.shape
+    datas = [mujoco.MjData(model) for _ in range(max(1, threads))]
+    init = np.stack([initial_physics_state(scene, datas[0], q) for q in qpos0])
+    control = np.repeat(actions, scene.cfg.frame_skip, axis=1)
+    state, _ = mujoco.rollout.rollout(model, datas, init, control)
+    # keep the state at the end of each control step; FULLPHYSICS = [time, qpos, qvel, ...]
+    state = state[:, scene.cfg.frame_skip - 1::scene.cfg.frame_skip]
+    nq, nv = model.nq, model.nv
+    qpos = np.concatenate([qpos0[:, None, :], state[:, :, 1:1 + nq]], axis=1)
+    qvel = np.concatenate([np.zeros((nbatch, 1, nv)), state[:, :, 1 + nq:1 + nq + nv]], axis=1)
+    return scene.observe(qpos, qvel), qvel
+
+
+def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
+                   progress: Callable[[int], None] | None = None) -> tuple[pa.Table, dict]:
+    """Collect ``cfg.transitions`` random-motion transitions in ``domain``; returns the table and stats."""
+    scene = BoxPushModel(domain, env_cfg)
+    n_episodes = -(-cfg.transitions // cfg.episode_steps)
+    state_cols = layout.state_columns(domain)
+    schema = data.transitions_schema(
+        state_cols, layout.action_columns(domain),
+        metadata={
+            "kind": "random", "domain": domain, "seed": cfg.seed, "layout": layout.describe(),
+            "env": env_cfg.model_dump(), "random": cfg.model_dump(),
+            "action_distribution": "uniform in [-amplitude, amplitude] per joint, held for "
+                                   "U{hold_min..hold_max} control steps",
+            "description": f"random-motion transitions in domain {domain}",
+        })
+    tables = []
+    t0 = time.perf_counter()
+    done = 0
+    for start in range(0, n_episodes, cfg.episodes_per_batch):
+        batch = range(start, min(start + cfg.episodes_per_batch, n_episodes))
+        qpos0, acts = [], []
+        for ep in batch:
+            rng = np.random.default_rng(episode_seed("random", cfg.seed, domain, ep))
+            qpos0.append(scene.sample_initial_qpos(rng))
+            acts.append(random_commands(rng, cfg.episode_steps, scene.act_dim, cfg))
+        obs, _ = rollout_episodes(scene, np.array(qpos0), np.array(acts), cfg.threads)
+        b, t = len(batch), cfg.episode_steps
+        tables.append(data.transitions_table(
+            schema,
+            episode_index=np.repeat(np.array(batch), t), frame_index=np.tile(np.arange(t), b), dt=scene.dt,
+            states=obs[:, :-1].reshape(b * t, -1), actions=np.array(acts).reshape(b * t, -1),
+            next_states=obs[:, 1:].reshape(b * t, -1)))
+        done += b * t
+        if progress:
+            progress(b * t)
+    wall = time.perf_counter() - t0
+    table = pa.concat_tables(tables).slice(0, cfg.transitions)
+    stats = {"transitions": table.num_rows, "episodes": n_episodes, "wall_s": wall,
+             "transitions_per_s": done / wall, "physics_steps_per_s": done * env_cfg.frame_skip / wall}
+    return table, stats

@@ -1,0 +1,60 @@
+"""Helpers shared by the thin stage scripts in ``stages/``: params, outputs, progress bars, errors."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from lfdt.config import Params, ParamsError, load_params
+
+
+def params(path: str | Path = "params.yaml") -> Params:
+    """Load and validate params.yaml (every stage does this before any compute)."""
+    return load_params(path)
+
+
+def main(fn: Callable[[], None]) -> None:
+    """Run a stage's main; a params problem exits 2 with its message, anything else raises (non-zero exit)."""
+    try:
+        fn()
+    except ParamsError as err:
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+
+
+def write_json(path: str | Path, obj: Any) -> Path:
+    """Write JSON atomically (small metrics files)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(obj, indent=2, sort_keys=False) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
+    """Write a list of dicts as CSV atomically (DVC plots)."""
+    rows = list(rows)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "w", newline="") as fh:
+        if rows:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+            w.writeheader()
+            w.writerows(rows)
+    os.replace(tmp, path)
+    return path
+
+
+def progress(total: int | None, desc: str, unit: str = "it") -> tqdm:
+    """A progress bar on stderr."""
+    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, mininterval=1.0, dynamic_ncols=True,
+                file=sys.stderr)

@@ -1,0 +1,217 @@
+"""MLflow tracking for every stage run.
+
+The default store is a sqlite database at the repository root (``mlflow.db``, an absolute URI,
+git-ignored); ``MLFLOW_TRACKING_URI`` overrides it (e.g. ``http://127.0.0.1:5000``). Metrics are
+buffered and sent with ``log_batch`` (one sqlite round trip costs ~4 ms, so never one call per point).
+Creating the experiment (and the sqlite schema) is serialised with a file lock, so stages started at
+once by ``dvc queue start -j 2`` cannot race.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import subprocess
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+EXPERIMENT_ENV = "LFDT_MLFLOW_EXPERIMENT"
+DEFAULT_EXPERIMENT = "lfdt"
+_BATCH = 900  # MLflow accepts at most 1000 metrics per log_batch call
+
+
+def project_root(start: Path | None = None) -> Path:
+    """The nearest directory at or above ``start`` (default: cwd) holding dvc.yaml, else cwd."""
+    here = (start or Path.cwd()).resolve()
+    for d in (here, *here.parents):
+        if (d / "dvc.yaml").exists():
+            return d
+    return here
+
+
+def tracking_uri() -> str:
+    """``MLFLOW_TRACKING_URI`` if set, else an absolute sqlite URI of ``<root>/mlflow.db``."""
+    return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{project_root() / 'mlflow.db'}"
+
+
+def git_commit(root: Path | None = None) -> str:
+    """The checked-out commit (with '-dirty' when the tree has changes), or 'unknown'."""
+    try:
+        cwd = root or project_root()
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
+                             check=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return sha + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def library_versions() -> dict[str, str]:
+    """Versions of the libraries whose behaviour the results depend on."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("mujoco", "torch", "stable-baselines3", "gymnasium"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested mapping -> {'a.b.c': value}; lists become JSON strings."""
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = json.dumps(v) if isinstance(v, list | tuple) else v
+    return out
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _retry(fn, attempts: int = 8):
+    """Retry a store call a few times: concurrent sqlite writers can see 'database is locked'."""
+    for i in range(attempts):
+        try:
+            return fn()
+        except Exception as err:  # noqa: BLE001 - re-raised below once retries are used up
+            if i == attempts - 1 or "locked" not in str(err).lower():
+                raise
+            time.sleep(0.2 * (i + 1))
+    return None
+
+
+def experiment_id(name: str | None = None) -> str:
+    """Id of the experiment ``name`` (default ``$LFDT_MLFLOW_EXPERIMENT`` or 'lfdt'), created if missing."""
+    import mlflow
+    from mlflow.exceptions import MlflowException
+
+    name = name or os.environ.get(EXPERIMENT_ENV, DEFAULT_EXPERIMENT)
+    uri = tracking_uri()
+    mlflow.set_tracking_uri(uri)
+    lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
+    ctx = _file_lock(lock) if lock else contextlib.nullcontext()
+    with ctx:
+        client = mlflow.MlflowClient()
+        exp = client.get_experiment_by_name(name)
+        if exp is not None:
+            return exp.experiment_id
+        try:
+            return client.create_experiment(name)
+        except MlflowException:
+            # another process (e.g. on a tracking server) created it between our two calls
+            exp = client.get_experiment_by_name(name)
+            if exp is None:
+                raise
+            return exp.experiment_id
+
+
+class Tracker:
+    """Buffered logging into one MLflow run."""
+
+    def __init__(self, run_id: str):
+        import mlflow
+
+        self.run_id = run_id
+        self.client = mlflow.MlflowClient()
+        self._buffer: list = []
+
+    def metrics(self, values: Mapping[str, float], step: int | None = None) -> None:
+        """Queue metrics (sent in batches; call :meth:`flush` or leave the run to send them)."""
+        from mlflow.entities import Metric
+
+        ts = int(time.time() * 1000)
+        for k, v in values.items():
+            self._buffer.append(Metric(key=k, value=float(v), timestamp=ts, step=int(step or 0)))
+        if len(self._buffer) >= _BATCH:
+            self.flush()
+
+    def series(self, key: str, values, steps=None) -> None:
+        """Queue a whole curve at once (e.g. a loss per epoch)."""
+        steps = range(len(values)) if steps is None else steps
+        for s, v in zip(steps, values):
+            self.metrics({key: v}, step=int(s))
+
+    def flush(self) -> None:
+        """Send queued metrics in batches of at most 900."""
+        while self._buffer:
+            chunk, self._buffer = self._buffer[:_BATCH], self._buffer[_BATCH:]
+            _retry(lambda c=chunk: self.client.log_batch(self.run_id, metrics=c))
+
+    def params(self, values: Mapping[str, Any]) -> None:
+        """Log (flattened) params in batches."""
+        from mlflow.entities import Param
+
+        items = [Param(k, str(v)[:6000]) for k, v in flatten(values).items()]
+        for i in range(0, len(items), 90):
+            _retry(lambda c=items[i:i + 90]: self.client.log_batch(self.run_id, params=c))
+
+    def tags(self, values: Mapping[str, Any]) -> None:
+        """Set run tags."""
+        from mlflow.entities import RunTag
+
+        items = [RunTag(k, str(v)) for k, v in values.items()]
+        _retry(lambda: self.client.log_batch(self.run_id, tags=items))
+
+    def artifact(self, path: str | Path, artifact_path: str | None = None) -> None:
+        """Upload a small file or a directory."""
+        path = Path(path)
+        if path.is_dir():
+            _retry(lambda: self.client.log_artifacts(self.run_id, str(path), artifact_path))
+        elif path.exists():
+            _retry(lambda: self.client.log_artifact(self.run_id, str(path), artifact_path))
+
+    def dict(self, obj: Any, name: str) -> None:
+        """Upload a JSON-serialisable object as an artifact file."""
+        _retry(lambda: self.client.log_dict(self.run_id, obj, name))
+
+
+@contextlib.contextmanager
+def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | None = None,
+              run_name: str | None = None, parent_run_id: str | None = None) -> Iterator[Tracker]:
+    """One MLflow run for one stage invocation; marked FAILED if the body raises."""
+    import mlflow
+
+    exp = experiment_id()
+    all_tags = {
+        "lfdt.stage": stage,
+        "mlflow.source.git.commit": git_commit(),
+        **{f"version.{k}": v for k, v in library_versions().items()},
+        **{f"lfdt.{k}": v for k, v in (tags or {}).items()},
+    }
+    if os.environ.get("DVC_EXP_NAME"):
+        all_tags["dvc.exp_name"] = os.environ["DVC_EXP_NAME"]
+    if parent_run_id:
+        all_tags["mlflow.parentRunId"] = parent_run_id
+    client = mlflow.MlflowClient()
+    run = _retry(lambda: client.create_run(exp, run_name=run_name or stage))
+    tracker = Tracker(run.info.run_id)
+    status = "FAILED"
+    try:
+        tracker.tags(all_tags)
+        tracker.params(params)
+        yield tracker
+        status = "FINISHED"
+    finally:
+        try:
+            tracker.flush()
+        finally:
+            _retry(lambda: client.set_terminated(run.info.run_id, status=status))

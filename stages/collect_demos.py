@@ -1,0 +1,35 @@
+"""DVC stage: roll out the SAC expert of one pairing until enough successful demonstrations."""
+
+import argparse
+from pathlib import Path
+
+from lfdt import data, experts, layout, stage, tracking
+
+
+def run() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--pairing", required=True, choices=layout.PAIRINGS)
+    ap.add_argument("--params", default="params.yaml")
+    args = ap.parse_args()
+    p = stage.params(args.params)
+    cfg = p.demos
+    model, expert_cfg = experts.load_expert(Path("models/experts") / args.pairing)
+    if expert_cfg["env"] != p.env.model_dump():
+        raise SystemExit(f"error: models/experts/{args.pairing} was trained with other env params than "
+                         f"params.yaml's env section; rerun train_experts (dvc repro does)")
+    out = Path("data/demos") / f"{args.pairing}.parquet"
+    with tracking.stage_run("collect_demos", {"env": p.env.model_dump(), "demos": cfg.model_dump()},
+                            tags={"pairing": args.pairing, "seed": cfg.seed},
+                            run_name=f"collect_demos-{args.pairing}") as run:
+        with stage.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
+            table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
+        data.write_table(table, out)
+        data.check_transitions(out, "demos", args.pairing)
+        stage.write_json(Path("reports/demos") / f"{args.pairing}.json", {"pairing": args.pairing, **stats})
+        run.metrics(stats)
+    print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "
+          f"mean length {stats['mean_demo_length']:.1f} steps")
+
+
+if __name__ == "__main__":
+    stage.main(run)

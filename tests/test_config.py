@@ -1,0 +1,73 @@
+"""params.yaml is validated before any compute; errors name the key and the value."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from lfdt.config import Params, ParamsError, load_params, render_defaults, validate_params
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_repository_params_are_valid_and_complete():
+    p = load_params(ROOT / "params.yaml")
+    raw = yaml.safe_load((ROOT / "params.yaml").read_text())
+    # every schema key is spelled out in params.yaml, so `dvc exp run -S` finds it
+    assert set(raw) == set(Params.model_fields)
+    assert p.random.transitions == 400_000 and p.demos.per_pairing == 200
+
+
+def test_rendered_defaults_validate():
+    validate_params(yaml.safe_load(render_defaults()))
+
+
+@pytest.mark.parametrize("raw, key, value", [
+    ({"experts": {"total_timesteps": -5}}, "experts.total_timesteps", "-5"),
+    ({"random": {"transitions": 0}}, "random.transitions", "0"),
+    ({"experts": {"learing_rate": 1e-3}}, "experts.learing_rate", "0.001"),
+    ({"surprise": 1}, "surprise", "1"),
+    ({"env": {"success": {"yaw": "small"}}}, "env.success.yaw", "'small'"),
+    ({"env": {"success": {"distance": -0.1}}}, "env.success.distance", "-0.1"),
+    ({"experts": {"gamma": 1.2}}, "experts.gamma", "1.2"),
+    ({"demos": {"per_pairing": 2.5}}, "demos.per_pairing", "2.5"),
+    ({"demos": {"deterministic": "yes"}}, "demos.deterministic", "'yes'"),
+    ({"random": {"amplitude": 1.5}}, "random.amplitude", "1.5"),
+    ({"experts": {"seed": 12}}, "experts.seed", "12"),
+])
+def test_bad_values_name_key_and_value(raw, key, value):
+    with pytest.raises(ParamsError) as err:
+        validate_params(raw)
+    msg = str(err.value)
+    assert key in msg and value in msg
+
+
+def test_cross_field_checks():
+    with pytest.raises(ParamsError, match="hold_min"):
+        validate_params({"random": {"hold_min": 4, "hold_max": 2}})
+    with pytest.raises(ParamsError, match="gears has 2 entries but links has 3"):
+        validate_params({"env": {"robot": {"links": [0.1, 0.1, 0.1], "gears": [1, 1], "damping": [1, 1, 1],
+                                           "joint_range": [1, 1, 1]}}})
+
+
+def test_not_a_mapping_and_missing_file(tmp_path):
+    with pytest.raises(ParamsError, match="mapping"):
+        validate_params([1, 2])
+    with pytest.raises(ParamsError, match="does not exist"):
+        load_params(tmp_path / "nope.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("env: [unclosed\n")
+    with pytest.raises(ParamsError, match="not valid YAML"):
+        load_params(bad)
+
+
+def test_stage_stops_before_compute_with_named_key(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text("random:\n  transitions: -3\n")
+    proc = subprocess.run([sys.executable, str(ROOT / "stages/collect_random.py"), "--domain", "Y",
+                           "--params", str(params)], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "random.transitions = -3" in proc.stderr
+    assert not (tmp_path / "data").exists() and not (tmp_path / "mlflow.db").exists()

@@ -1,0 +1,90 @@
+"""SAC expert training: resumable after a kill, saved as a state dict with its config, demos with schema."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from lfdt import data, experts, layout
+from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ExpertsConfig(total_timesteps=1_200, n_envs=2, net_arch=[32, 32], batch_size=32, buffer_size=5_000,
+                     learning_starts=200, checkpoint_every=400, log_every=200, eval_episodes=3)
+
+
+def test_train_save_load_and_demos(tmp_path):
+    env_cfg = EnvConfig()
+    logged = []
+    model, stats = experts.train_expert("R1H", env_cfg, TINY, tmp_path / "ckpt", log=lambda m, s: logged.append(s))
+    assert stats["timesteps"] == TINY.total_timesteps and stats["resumed_from_timesteps"] == 0
+    assert logged == list(range(200, 1_201, 200))
+    assert (tmp_path / "ckpt" / "latest.json").exists()
+    experts.save_expert(model, tmp_path / "expert", "R1H", env_cfg, TINY, {"note": "tiny"})
+    loaded, cfg = experts.load_expert(tmp_path / "expert")
+    assert cfg["observation_columns"] == layout.state_columns("R1H") and cfg["note"] == "tiny"
+    obs = np.zeros(21)
+    np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+    ev = experts.evaluate_expert(loaded, "R1H", env_cfg, 3, 0)
+    assert ev["episodes"] == 3 and 0.0 <= ev["success_rate"] <= 1.0
+    table, st = experts.collect_demos(loaded, "R1H", env_cfg, DemosConfig(per_pairing=2, success_only=False))
+    path = data.write_table(table, tmp_path / "R1H.parquet")
+    meta = data.check_transitions(path, "demos", "R1H")
+    assert meta["robot"] == "r1" and st["demonstrations"] == 2 and st["attempts"] == 2
+    df = data.read_transitions(path)
+    assert [c for c in df.columns if c.startswith("action.")] == ["action.r1.tau0", "action.r1.tau1", "action.r1.tau2"]
+    assert [c for c in df.columns if c.startswith("human_action.")] == [f"human_action.h.tau{i}" for i in range(4)]
+
+
+def test_demos_fail_loudly_when_expert_cannot_succeed(tmp_path):
+    model, _ = experts.train_expert("HR2", EnvConfig(), TINY.model_copy(update={"total_timesteps": 200}),
+                                    tmp_path / "ckpt")
+    with pytest.raises(RuntimeError, match="demos.max_attempts = 3"):
+        experts.collect_demos(model, "HR2", EnvConfig(), DemosConfig(per_pairing=5, max_attempts=3))
+
+
+def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
+    env_cfg = EnvConfig()
+    model, _ = experts.train_expert("R1H", env_cfg, TINY.model_copy(update={"total_timesteps": 400}), tmp_path)
+    other = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, TINY.model_copy(update={"gamma": 0.9})))
+    assert other.latest() is None
+    same = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, TINY.model_copy(
+        update={"total_timesteps": 400})))
+    assert same.latest() is not None
+
+
+@pytest.mark.slow
+def test_killed_training_resumes_where_it_stopped(tmp_path):
+    params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
+              "demos": {"per_pairing": 1, "success_only": False}}
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
+    cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--pairing", "R1H"]
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path / 'mlflow.db'}"}
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    pointer = tmp_path / "checkpoints/experts/R1H/latest.json"
+    deadline = time.time() + 240
+    while time.time() < deadline:
+        if pointer.exists() and json.loads(pointer.read_text())["num_timesteps"] >= 1_000:
+            break
+        assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    stopped_at = json.loads(pointer.read_text())["num_timesteps"]
+    assert 1_000 <= stopped_at < 3_000
+    assert not (tmp_path / "models/experts/R1H/policy.pt").exists()
+    done = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "reports/experts/R1H_train.json").read_text())
+    assert report["resumed_from_timesteps"] == stopped_at
+    assert report["timesteps"] == 3_000
+    assert (tmp_path / "models/experts/R1H/policy.pt").exists()
+    assert not (tmp_path / "checkpoints/experts/R1H").exists()  # cleaned up once the model is safe
