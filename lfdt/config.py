@@ -179,6 +179,9 @@ class RandomConfig(Strict):
     """Fewest control steps a random command is held."""
     hold_max: PosInt = 5
     """Most control steps a random command is held."""
+    box_y_spread: NonNegFloat = 0.12
+    """Episodes start with the box a further U[0, box_y_spread] m along the push direction, covering the path
+    to the goal (0 = the task's own start distribution)."""
     amplitude: Annotated[float, Field(gt=0, le=1)] = 1.0
     """Commands are uniform in [-amplitude, amplitude] per joint."""
     threads: PosInt = 2

@@ -239,12 +239,17 @@ class BoxPushModel:
             out[i] = (x + c * lx - s * ly, y + s * lx + c * ly)
         return out
 
-    def sample_initial_qpos(self, rng: np.random.Generator) -> np.ndarray:
-        """A start configuration: noisy box pose, end effectors just behind the box's rear face, noisy joints."""
+    def sample_initial_qpos(self, rng: np.random.Generator, y_spread: float = 0.0) -> np.ndarray:
+        """A start configuration: noisy box pose, end effectors just behind the box's rear face, noisy joints.
+
+        ``y_spread`` > 0 moves the box a further U[0, y_spread] along the push direction (random-motion
+        data uses it to cover the whole path to the goal, not only the start).
+        """
         b = self.cfg.box
+        extra_y = rng.uniform(0, y_spread) if y_spread else 0.0
         box = np.array([
             b.start[0] + rng.uniform(-b.start_noise_xy, b.start_noise_xy),
-            b.start[1] + rng.uniform(-b.start_noise_xy, b.start_noise_xy),
+            b.start[1] + rng.uniform(-b.start_noise_xy, b.start_noise_xy) + extra_y,
             rng.uniform(-b.start_noise_yaw, b.start_noise_yaw),
         ])
         targets = self.contact_targets(box)

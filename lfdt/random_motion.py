@@ -1,10 +1,12 @@
 """Random-motion data: batched MuJoCo rollouts of random torque commands.
 
 The distribution: each episode starts from the task's start distribution (the same as the
-experts'), then every joint receives a command drawn uniformly from [-amplitude, amplitude],
-held for a number of control steps drawn uniformly from {hold_min, ..., hold_max} (independently
-per episode and per hold). Holding a command lets the heavily damped arms actually travel, so the
-data covers the workspace and the box gets pushed, not only jittered.
+experts'), with the box moved a further U[0, box_y_spread] along the push direction so that the
+data covers the whole path to the goal; then every joint receives a command drawn uniformly from
+[-amplitude, amplitude], held for a number of control steps drawn uniformly from
+{hold_min, ..., hold_max} (independently per episode and per hold). Holding a command lets the
+heavily damped arms actually travel, so the data covers the workspace and the box gets pushed,
+not only jittered.
 
 Simulation goes through ``mujoco.rollout`` on all threads: the controls of a whole batch of
 episodes are drawn first (open loop), then MuJoCo steps them in C. The resulting states are the
@@ -92,7 +94,7 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
         qpos0, acts = [], []
         for ep in batch:
             rng = np.random.default_rng(episode_seed("random", cfg.seed, domain, ep))
-            qpos0.append(scene.sample_initial_qpos(rng))
+            qpos0.append(scene.sample_initial_qpos(rng, cfg.box_y_spread))
             acts.append(random_commands(rng, cfg.episode_steps, scene.act_dim, cfg))
         obs, _ = rollout_episodes(scene, np.array(qpos0), np.array(acts), cfg.threads)
         b, t = len(batch), cfg.episode_steps

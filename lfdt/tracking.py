@@ -114,8 +114,10 @@ def experiment_id(name: str | None = None) -> str:
         exp = client.get_experiment_by_name(name)
         if exp is not None:
             return exp.experiment_id
+        # a local store keeps artifacts beside the database, whatever directory a stage runs from
+        artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None
         try:
-            return client.create_experiment(name)
+            return client.create_experiment(name, artifact_location=artifacts)
         except MlflowException:
             # another process (e.g. on a tracking server) created it between our two calls
             exp = client.get_experiment_by_name(name)
