@@ -7,7 +7,7 @@ a wrong type or an impossible value raises :class:`ParamsError` naming the key a
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -213,6 +213,120 @@ class DemosConfig(Strict):
     """Collection seed."""
 
 
+class DynamicsConfig(Strict):
+    """Forward and inverse dynamics models of domain Y (paper: 4 FC layers of 256, leaky ReLU, Adam 3e-4)."""
+
+    hidden: list[PosInt] = Field(default=[256, 256, 256], min_length=1)
+    """Hidden layers ('4 fully connected layers' = 3 hidden + the output layer)."""
+    learning_rate: PosFloat = 3e-4
+    """Adam learning rate."""
+    batch_size: PosInt = 32
+    """Minibatch size (the paper's 32)."""
+    iterations: PosInt = 40_000
+    """Gradient steps of each model."""
+    val_fraction: Fraction = 0.1
+    """Fraction of random-motion episodes held out."""
+    std_floor: PosFloat = 1e-2
+    """Floor on the per-dimension standard deviation used for normalisation."""
+    eval_every: PosInt = 2_000
+    """Iterations between held-out evaluations (learning curves)."""
+    torch_threads: PosInt = 1
+    """Torch CPU threads."""
+    seed: Annotated[int, Field(ge=0, le=9)] = 0
+    """Initialisation, minibatch and split seed."""
+
+
+TranslatorMethod = Literal["lfdt", "lfdt_no_dyn", "lfdt_no_id"]
+BCMethod = Literal["bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id"]
+
+
+class GridConfig(Strict):
+    """Values the matrix stages of the second half run over (each stage instance gets one scalar of each)."""
+
+    translator_methods: list[TranslatorMethod] = Field(default=["lfdt", "lfdt_no_dyn", "lfdt_no_id"], min_length=1)
+    """Translator variants: lfdt (all losses), lfdt_no_dyn (lambda_dyn = 0), lfdt_no_id (lambda_id = 0)."""
+    bc_methods: list[BCMethod] = Field(default=["bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id"],
+                                       min_length=1)
+    """Rows of Table I: BC on each translator's output, and BC without translation."""
+    demos: list[PosInt] = Field(default=[50, 100, 200], min_length=1)
+    """Demonstrations per pairing given to translation and BC (a subset drawn per seed)."""
+    seeds: list[Annotated[int, Field(ge=0, le=9)]] = Field(default=[0, 1, 2], min_length=1)
+    """Training seeds (translator, BC, demo subset)."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> GridConfig:
+        for name in ("translator_methods", "bc_methods", "demos", "seeds"):
+            values = getattr(self, name)
+            if len(set(values)) != len(values):
+                raise ValueError(f"{name} has duplicates: {values}")
+        missing = [m for m in self.bc_methods if m != "bc_no_translation" and m not in self.translator_methods]
+        if missing:
+            raise ValueError(f"bc_methods {missing} need a translator: add them to translator_methods")
+        return self
+
+
+class TranslatorConfig(Strict):
+    """Generator G, discriminator D and the loss of eq. 6 (paper: 3 FC layers of 256, leaky ReLU, Adam 3e-4,
+    batch 32)."""
+
+    lambda_adv: NonNegFloat = 1.0
+    """Weight of the adversarial loss L_adv (eq. 1)."""
+    lambda_dyn: NonNegFloat = 10.0
+    """Weight of the dynamics-consistency loss L_dyn (eq. 2); lfdt_no_dyn sets it to 0."""
+    lambda_id: NonNegFloat = 10.0
+    """Weight of the partial identity loss L_id (eq. 5); lfdt_no_id sets it to 0."""
+    hidden: list[PosInt] = Field(default=[256, 256], min_length=1)
+    """Hidden layers of G and D ('3 fully connected layers' = 2 hidden + output)."""
+    learning_rate: PosFloat = 3e-4
+    """Adam learning rate of G and D."""
+    batch_size: Annotated[int, Field(ge=4)] = 32
+    """Minibatch: half demonstration transitions, half X random transitions, both pairings in each half."""
+    iterations: PosInt = 6_000
+    """Gradient steps of G (and of D)."""
+    gan_loss: Literal["bce", "lsgan"] = "bce"
+    """Non-saturating BCE-with-logits as in eq. 1, or least squares."""
+    history_size: Annotated[int, Field(ge=0)] = 0
+    """Pool of past generated states shown to D (0 = none; Cycle-Dynamics uses 128)."""
+    dyn_scale: Literal["delta", "state"] = "delta"
+    """Units of L_dyn: normalised one-step changes ('delta') or normalised states ('state')."""
+    labels: Literal["inverse", "recorded_robot"] = "inverse"
+    """BC action labels: F^-1(y_hat_t, y_hat_t+1) for both arms, or keep the recorded action of the real robot."""
+    log_every: PosInt = 200
+    """Iterations between diagnostics sent to MLflow."""
+    torch_threads: PosInt = 1
+    """Torch CPU threads."""
+
+
+class BCConfig(Strict):
+    """Behaviour cloning (paper: 90/10 split, keep the checkpoint with the lowest validation loss)."""
+
+    hidden: list[PosInt] = Field(default=[256, 256], min_length=1)
+    """Hidden layers of the policy."""
+    learning_rate: PosFloat = 3e-4
+    """Adam learning rate."""
+    batch_size: PosInt = 32
+    """Minibatch size."""
+    iterations: PosInt = 8_000
+    """Gradient steps."""
+    val_fraction: Fraction = 0.1
+    """Fraction of demonstrations (whole episodes) held out for checkpoint selection."""
+    eval_every: PosInt = 200
+    """Iterations between validation losses (a checkpoint is kept when the loss improves)."""
+    torch_threads: PosInt = 1
+    """Torch CPU threads."""
+
+
+class EvaluationConfig(Strict):
+    """Trials in domain Y from fixed start states (the evaluation seed block, never used in training)."""
+
+    trials: PosInt = 20
+    """Trials per (method, demos, seed)."""
+    videos: Annotated[int, Field(ge=0)] = 2
+    """Rollout videos (mp4) of the first trials of each config."""
+    video_size: Annotated[int, Field(ge=64, le=640)] = 240
+    """Video frame width and height, pixels."""
+
+
 class Params(Strict):
     """The whole params.yaml."""
 
@@ -224,6 +338,16 @@ class Params(Strict):
     """Random-motion collection."""
     demos: DemosConfig = DemosConfig()
     """Demonstration collection."""
+    dynamics: DynamicsConfig = DynamicsConfig()
+    """Forward and inverse dynamics of domain Y."""
+    grid: GridConfig = GridConfig()
+    """Matrix values of the translation, BC and evaluation stages."""
+    translator: TranslatorConfig = TranslatorConfig()
+    """Domain translation (G, D and their losses)."""
+    bc: BCConfig = BCConfig()
+    """Behaviour cloning."""
+    evaluation: EvaluationConfig = EvaluationConfig()
+    """Evaluation of the BC policies in domain Y."""
 
 
 class ParamsError(ValueError):

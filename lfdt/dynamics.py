@@ -1,0 +1,153 @@
+"""Forward and inverse dynamics of domain Y (paper eqs. 3-4), fit on Y's random-motion data.
+
+Everything works in the normalised state space of Y (z-score per dimension, statistics of Y's
+random data, std floor ``std_floor``): the translator's generator outputs normalised states and
+feeds them straight to these models.
+
+* F(y_t, a_t) = y_t + delta_scale * f([y_t, a_t])  predicts the next normalised state;
+* F^-1(y_t, y_t+1) = g([y_t, (y_t+1 - y_t) / delta_scale])  predicts the action,
+
+where ``delta_scale`` is the per-dimension standard deviation of normalised one-step changes, so
+both nets see and produce quantities of unit scale.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from lfdt import data, layout
+from lfdt.config import DynamicsConfig
+from lfdt.nets import Normalizer, batches, mlp
+
+
+class DynamicsModels(nn.Module):
+    """The normaliser of y, the forward model F and the inverse model F^-1, saved as one state dict."""
+
+    def __init__(self, y_dim: int, a_dim: int, hidden: list[int], slope: float = 0.2):
+        super().__init__()
+        self.y_norm = Normalizer(np.zeros(y_dim), np.ones(y_dim))
+        self.register_buffer("delta_scale", torch.ones(y_dim))
+        self.f = mlp(y_dim + a_dim, y_dim, hidden, slope)
+        self.g = mlp(2 * y_dim, a_dim, hidden, slope)
+
+    def forward_model(self, y_n: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+        """F: next normalised state from a normalised state and an action."""
+        return y_n + self.delta_scale * self.f(torch.cat([y_n, a], dim=-1))
+
+    def inverse_model(self, y_n: torch.Tensor, y2_n: torch.Tensor) -> torch.Tensor:
+        """F^-1: the action that takes normalised state y_n to y2_n."""
+        return self.g(torch.cat([y_n, (y2_n - y_n) / self.delta_scale], dim=-1))
+
+
+@dataclass
+class RandomY:
+    """Y's random-motion transitions as arrays (raw units), with an episode-level split."""
+
+    y: np.ndarray
+    a: np.ndarray
+    y2: np.ndarray
+    episode: np.ndarray
+
+
+def load_random_y(path) -> RandomY:
+    """Read data/random/Y.parquet into arrays, columns selected by name."""
+    cols = layout.state_columns("Y")
+    df = data.read_transitions(path)
+    return RandomY(
+        y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32),
+        a=df[[layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]].to_numpy(np.float32),
+        y2=df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32),
+        episode=df["episode_index"].to_numpy())
+
+
+def split_episodes(episode: np.ndarray, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Boolean train/validation masks; whole episodes go to one side."""
+    eps = np.unique(episode)
+    rng = np.random.default_rng(seed)
+    n_val = max(1, int(round(val_fraction * len(eps))))
+    val_eps = rng.choice(eps, size=n_val, replace=False)
+    val = np.isin(episode, val_eps)
+    return ~val, val
+
+
+def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], None] | None = None,
+                 progress=None) -> tuple[DynamicsModels, dict]:
+    """Fit F and F^-1 (L2 losses, eqs. 3-4) on the training episodes; report held-out errors and ratios."""
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.torch_threads)
+    train, val = split_episodes(d.episode, cfg.val_fraction, cfg.seed)
+    models = DynamicsModels(d.y.shape[1], d.a.shape[1], list(cfg.hidden))
+    norm = Normalizer.fit(d.y[train], cfg.std_floor, layout.state_columns("Y"))
+    models.y_norm.load_state_dict(norm.state_dict())
+    with torch.no_grad():
+        y_n = models.y_norm(torch.from_numpy(d.y))
+        y2_n = models.y_norm(torch.from_numpy(d.y2))
+        delta = (y2_n - y_n)[torch.from_numpy(train)]
+        models.delta_scale.copy_(torch.clamp(delta.std(dim=0), min=cfg.std_floor))
+    a = torch.from_numpy(d.a)
+    tr_idx = torch.from_numpy(np.flatnonzero(train))
+    va_idx = torch.from_numpy(np.flatnonzero(val))
+    opt_f = torch.optim.Adam(models.f.parameters(), lr=cfg.learning_rate)
+    opt_g = torch.optim.Adam(models.g.parameters(), lr=cfg.learning_rate)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    a_mean = a[tr_idx].mean(dim=0)
+
+    def held_out() -> dict:
+        with torch.no_grad():
+            errs_f, errs_triv, errs_g, errs_mean = [], [], [], []
+            for chunk in va_idx.split(65536):
+                yv, y2v, av = y_n[chunk], y2_n[chunk], a[chunk]
+                errs_f.append(((models.forward_model(yv, av) - y2v) ** 2).mean(dim=0) * len(chunk))
+                errs_triv.append(((yv - y2v) ** 2).mean(dim=0) * len(chunk))
+                errs_g.append(((models.inverse_model(yv, y2v) - av) ** 2).mean(dim=0) * len(chunk))
+                errs_mean.append(((a_mean - av) ** 2).mean(dim=0) * len(chunk))
+            n = len(va_idx)
+            f_dim, triv_dim = sum(errs_f) / n, sum(errs_triv) / n
+            g_dim, mean_dim = sum(errs_g) / n, sum(errs_mean) / n
+        return {"forward_mse": float(f_dim.mean()), "forward_trivial_mse": float(triv_dim.mean()),
+                "forward_ratio": float(f_dim.mean() / triv_dim.mean()),
+                "inverse_mse": float(g_dim.mean()), "inverse_trivial_mse": float(mean_dim.mean()),
+                "inverse_ratio": float(g_dim.mean() / mean_dim.mean()),
+                "forward_mse_per_column": dict(zip(layout.state_columns("Y"), f_dim.tolist())),
+                "forward_trivial_mse_per_column": dict(zip(layout.state_columns("Y"), triv_dim.tolist())),
+                "inverse_mse_per_column": dict(zip(layout.action_columns("Y"), g_dim.tolist()))}
+
+    curve = []
+    t0 = time.perf_counter()
+    run_f, run_g = 0.0, 0.0
+    for it in range(1, cfg.iterations + 1):
+        idx = tr_idx[batches(len(tr_idx), cfg.batch_size, gen)]
+        yb, y2b, ab = y_n[idx], y2_n[idx], a[idx]
+        loss_f = ((models.forward_model(yb, ab) - y2b) ** 2).mean()
+        opt_f.zero_grad(set_to_none=True)
+        loss_f.backward()
+        opt_f.step()
+        loss_g = ((models.inverse_model(yb, y2b) - ab) ** 2).mean()
+        opt_g.zero_grad(set_to_none=True)
+        loss_g.backward()
+        opt_g.step()
+        run_f += loss_f.item()
+        run_g += loss_g.item()
+        if progress is not None:
+            progress.update(1)
+        if it % cfg.eval_every == 0 or it == cfg.iterations:
+            n = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
+            ev = held_out()
+            point = {"train/forward_loss": run_f / n, "train/inverse_loss": run_g / n,
+                     "val/forward_mse": ev["forward_mse"], "val/inverse_mse": ev["inverse_mse"],
+                     "val/forward_ratio": ev["forward_ratio"], "val/inverse_ratio": ev["inverse_ratio"]}
+            run_f = run_g = 0.0
+            curve.append({"iteration": it, **point})
+            if log:
+                log(point, it)
+    wall = time.perf_counter() - t0
+    result = held_out()
+    result.update({"train_transitions": int(train.sum()), "val_transitions": int(val.sum()),
+                   "wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve})
+    return models.eval(), result
