@@ -157,3 +157,18 @@ def check_transitions(path: str | Path, kind: str, domain: str) -> dict:
     if problems:
         raise ValueError(f"{path}: " + "; ".join(problems))
     return meta
+
+
+def demo_subset(path: str | Path, n: int, seed: int, purpose_key: str) -> list[int]:
+    """The episode indices of ``n`` demonstrations drawn from a demos file for a training seed.
+
+    The draw depends only on (seed, purpose_key, the file's episodes), so translation and BC of the same
+    seed use the same subset. ``n`` equal to the number available takes them all.
+    """
+    episodes = np.unique(pq.read_table(path, columns=["episode_index"]).column(0).to_numpy())
+    if n > len(episodes):
+        raise ValueError(f"{n} demonstrations asked for (grid.demos) but {path} holds only {len(episodes)} "
+                         f"(demos.per_pairing)")
+    key = [seed] + [ord(c) for c in purpose_key]
+    rng = np.random.default_rng(key)
+    return sorted(int(e) for e in rng.choice(episodes, size=n, replace=False))

@@ -54,6 +54,20 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
     return path
 
 
+def wall_since_start() -> float:
+    """Seconds since this process started (imports included): a stage's own wall time."""
+    import time
+
+    import psutil
+
+    return time.time() - psutil.Process().create_time()
+
+
+def config_name(method: str, demos: int, seed: int) -> str:
+    """Name of one (method, demos, seed) configuration in file and run names."""
+    return f"{method}-d{demos}-s{seed}"
+
+
 def progress(total: int | None, desc: str, unit: str = "it") -> tqdm:
     """A progress bar on stderr."""
     return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, mininterval=1.0, dynamic_ncols=True,

@@ -25,8 +25,10 @@ def run() -> None:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
         data.write_table(table, out)
         data.check_transitions(out, "demos", args.pairing)
-        stage.write_json(Path("reports/demos") / f"{args.pairing}.json", {"pairing": args.pairing, **stats})
+        stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
+        stage.write_json(Path("reports/demos") / f"{args.pairing}.json",
+                         {"pairing": args.pairing, **stats, "mlflow_run_id": run.run_id})
     print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "
           f"mean length {stats['mean_demo_length']:.1f} steps")
 

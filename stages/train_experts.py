@@ -24,7 +24,8 @@ def run() -> None:
                 log=lambda m, step: run.metrics(m, step), progress=bar)
         ev = experts.evaluate_expert(model, args.pairing, env_cfg, cfg.eval_episodes, cfg.seed)
         curve = stats.pop("curve")
-        summary = {"pairing": args.pairing, **ev, **stats}
+        summary = {"pairing": args.pairing, **ev, **stats, "stage_wall_s": stage.wall_since_start(),
+                   "mlflow_run_id": run.run_id}
         experts.save_expert(model, out, args.pairing, env_cfg, cfg, {"evaluation": ev, "training": stats})
         stage.write_json(reports / f"{args.pairing}_train.json", summary)
         stage.write_csv(reports / f"{args.pairing}_curve.csv",

@@ -1,0 +1,162 @@
+"""Behaviour cloning: minimise E||a - pi(y)||^2 (paper §III-A), 90/10 split, minimum-validation checkpoint.
+
+A policy is a set of members, each reading its own named state columns and writing its own named
+action columns of domain Y:
+
+* LfDT and its ablations: one member, all of y -> (a^R1, a^R2), from translated demonstrations;
+* BC without translation (paper §IV-C): pi^R1(x^R1, x^O) from R1H's raw demonstrations with the
+  recorded robot action, pi^R2(x^R2, x^O) from HR2's, run side by side in Y.
+
+Inputs are z-scored with the statistics of each member's own training data (std floor 1e-2).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+
+from lfdt import layout
+from lfdt.config import BCConfig
+from lfdt.nets import Normalizer, load_state, mlp, read_config, save_state
+
+
+class BCMember(nn.Module):
+    """One cloned policy: named state columns in, named action columns out."""
+
+    def __init__(self, in_columns: list[str], out_columns: list[str], hidden: list[int]):
+        super().__init__()
+        self.in_columns = list(in_columns)
+        self.out_columns = list(out_columns)
+        self.norm = Normalizer(np.zeros(len(in_columns)), np.ones(len(in_columns)))
+        self.net = mlp(len(in_columns), len(out_columns), hidden)
+
+    def forward(self, s: torch.Tensor) -> torch.Tensor:
+        return self.net(self.norm(s))
+
+
+@dataclass
+class BCTask:
+    """What one member learns from: its columns and a DataFrame of transitions (state.*, action.*)."""
+
+    name: str
+    in_columns: list[str]
+    out_columns: list[str]
+    frame: pd.DataFrame
+
+
+def tasks_for(method: str, translated: pd.DataFrame | None = None,
+              raw_demos: dict[str, pd.DataFrame] | None = None) -> list[BCTask]:
+    """The members a method trains, with their data."""
+    if method == "bc_no_translation":
+        out = []
+        for pairing, df in (raw_demos or {}).items():
+            robot = layout.robot_arm(pairing)
+            out.append(BCTask(f"pi_{robot}", layout.arm_columns(robot) + list(layout.OBJECT_COLUMNS),
+                              layout.arm_action_columns(robot), df))
+        if sorted(t.name for t in out) != ["pi_r1", "pi_r2"]:
+            raise ValueError("bc_no_translation needs the raw demonstrations of both pairings")
+        return out
+    if translated is None:
+        raise ValueError(f"{method} needs translated demonstrations")
+    return [BCTask("pi", layout.state_columns("Y"), layout.action_columns("Y"), translated)]
+
+
+def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
+    eps = np.unique(episodes)
+    n_val = max(1, int(round(val_fraction * len(eps)))) if len(eps) > 1 else 0
+    val_eps = rng.choice(eps, size=n_val, replace=False) if n_val else np.array([], dtype=eps.dtype)
+    return np.isin(episodes, val_eps)
+
+
+def train_member(task: BCTask, cfg: BCConfig, seed: int,
+                 log: Callable[[dict, int], None] | None = None, progress=None) -> tuple[BCMember, dict]:
+    """Fit one member; keep the parameters of the lowest validation loss."""
+    torch.manual_seed(seed)
+    torch.set_num_threads(cfg.torch_threads)
+    rng = np.random.default_rng(seed)
+    gen = torch.Generator().manual_seed(seed)
+    s = task.frame[[layout.STATE_PREFIX + c for c in task.in_columns]].to_numpy(np.float32)
+    a = task.frame[[layout.ACTION_PREFIX + c for c in task.out_columns]].to_numpy(np.float32)
+    val = _split(task.frame.episode_index.to_numpy(), cfg.val_fraction, rng)
+    member = BCMember(task.in_columns, task.out_columns, list(cfg.hidden))
+    member.norm.load_state_dict(Normalizer.fit(s[~val], 1e-2).state_dict())
+    s_t, a_t = torch.from_numpy(s), torch.from_numpy(a)
+    tr_idx = torch.from_numpy(np.flatnonzero(~val))
+    va_idx = torch.from_numpy(np.flatnonzero(val))
+    opt = torch.optim.Adam(member.parameters(), lr=cfg.learning_rate)
+    best, best_state, best_it = float("inf"), None, 0
+    curve, running = [], 0.0
+    t0 = time.perf_counter()
+    for it in range(1, cfg.iterations + 1):
+        idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)]
+        loss = ((member(s_t[idx]) - a_t[idx]) ** 2).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        running += float(loss)
+        if progress is not None:
+            progress.update(1)
+        if it % cfg.eval_every == 0 or it == cfg.iterations:
+            n = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
+            with torch.no_grad():
+                sel = va_idx if len(va_idx) else tr_idx
+                v = float(((member(s_t[sel]) - a_t[sel]) ** 2).mean())
+            point = {f"{task.name}/train_loss": running / n, f"{task.name}/val_loss": v}
+            running = 0.0
+            curve.append({"iteration": it, **point})
+            if v < best:
+                best, best_it = v, it
+                best_state = {k: t.clone() for k, t in member.state_dict().items()}
+            if log:
+                log(point, it)
+    member.load_state_dict(best_state)
+    wall = time.perf_counter() - t0
+    return member.eval(), {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
+                           "val_samples": int(val.sum()), "wall_time_s": wall,
+                           "iterations_per_s": cfg.iterations / wall, "curve": curve}
+
+
+class BCPolicy:
+    """A trained policy for domain Y: its members' actions, put in Y's action order."""
+
+    def __init__(self, members: list[BCMember]):
+        self.members = members
+        y_cols = layout.state_columns("Y")
+        a_cols = layout.action_columns("Y")
+        self._in = [np.array([y_cols.index(c) for c in m.in_columns]) for m in members]
+        self._out = [np.array([a_cols.index(c) for c in m.out_columns]) for m in members]
+        covered = np.concatenate(self._out)
+        if sorted(covered.tolist()) != list(range(len(a_cols))):
+            raise ValueError("the policy's members do not cover every action of domain Y exactly once")
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        act = np.zeros(len(layout.action_columns("Y")))
+        with torch.no_grad():
+            for m, i, o in zip(self.members, self._in, self._out):
+                act[o] = m(torch.as_tensor(y[i], dtype=torch.float32)[None])[0].numpy()
+        return np.clip(act, -1.0, 1.0)
+
+    def save(self, out_dir: Path, config: dict) -> None:
+        """One state dict per member (``<name>.pt``) with a JSON config beside it."""
+        for m, name in zip(self.members, config["members"]):
+            save_state(m, Path(out_dir) / f"{name}.pt",
+                       {**config, "member": name, "in_columns": m.in_columns, "out_columns": m.out_columns})
+
+    @classmethod
+    def load(cls, model_dir: Path) -> tuple[BCPolicy, dict]:
+        """Load every member of a saved policy (``weights_only=True``)."""
+        members, cfg = [], None
+        for pt in sorted(Path(model_dir).glob("*.pt")):
+            cfg = read_config(pt)
+            m = BCMember(cfg["in_columns"], cfg["out_columns"], cfg["bc"]["hidden"])
+            members.append(load_state(m, pt))
+        if not members:
+            raise FileNotFoundError(f"no policy (*.pt) in {model_dir}")
+        return cls(members), cfg

@@ -1,0 +1,96 @@
+"""Evaluation of policies in domain Y from fixed start states, and the aggregation into Table I.
+
+Start states come from the ``evaluation`` seed block (:mod:`lfdt.seeding`): trial i of every
+method, demo count and seed starts from the same state, and no training or data-collection run
+ever resets with one of these seeds. They are fixed in advance, never chosen by outcome.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lfdt.config import EnvConfig
+from lfdt.envs import BoxPushEnv
+from lfdt.seeding import episode_seed
+
+# The paper's Table I (success rate in %, 20 trials x 3 seeds).
+PAPER_TABLE1: dict[str, dict[int, float]] = {
+    "bc_no_translation": {50: 28.3, 100: 6.7, 200: 26.7},
+    "lfdt_no_dyn": {50: 51.7, 100: 61.7, 200: 51.7},
+    "lfdt_no_id": {50: 0.0, 100: 0.0, 200: 0.0},
+    "lfdt": {50: 80.0, 100: 81.7, 200: 71.7},
+}
+METHOD_TITLES = {
+    "bc_no_translation": "BC w/o translation",
+    "lfdt_no_dyn": "LfDT w/o dynamics-consistency",
+    "lfdt_no_id": "LfDT w/o partial identity",
+    "lfdt": "LfDT",
+}
+
+
+def evaluation_seeds(trials: int) -> list[int]:
+    """Reset seeds of the evaluation trials (the same for every config)."""
+    return [episode_seed("evaluation", 0, "Y", i) for i in range(trials)]
+
+
+def run_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, trials: int, videos: int = 0,
+               video_dir: Path | None = None, video_size: int = 240, progress=None) -> list[dict]:
+    """Run a policy in Y from the fixed start states; record per-trial outcome and the first ``videos`` as mp4."""
+    results = []
+    for i, seed in enumerate(evaluation_seeds(trials)):
+        record = i < videos and video_dir is not None
+        env = BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
+                         height=video_size)
+        obs, info = env.reset(seed=seed)
+        frames = [env.render()] if record else []
+        success, steps = False, 0
+        for steps in range(1, env_cfg.max_episode_steps + 1):
+            obs, _, term, trunc, info = env.step(policy(obs))
+            if record:
+                frames.append(env.render())
+            if term or trunc:
+                success = bool(term)
+                break
+        results.append({"trial": i, "seed": seed, "success": success, "steps": steps,
+                        "final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
+        if record:
+            write_video(frames, Path(video_dir) / f"trial{i:02d}.mp4", fps=env.metadata["render_fps"])
+        env.close()
+        if progress is not None:
+            progress.update(1)
+    return results
+
+
+def write_video(frames: list[np.ndarray], path: Path, fps: int) -> Path:
+    """Encode frames as H.264 mp4 (the ffmpeg binary comes with imageio-ffmpeg; no download)."""
+    import imageio.v2 as imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    imageio.mimwrite(path, frames, fps=fps, codec="libx264", quality=7, macro_block_size=8)
+    return path
+
+
+def wilson_interval(successes: int, trials: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a binomial proportion."""
+    if trials == 0:
+        return (0.0, 1.0)
+    p = successes / trials
+    denom = 1 + z * z / trials
+    centre = (p + z * z / (2 * trials)) / denom
+    half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def seed_mean_interval(rates: list[float], z_t: dict[int, float] | None = None) -> tuple[float, float]:
+    """95 % t-interval of the mean of per-seed success rates (degenerate with one seed)."""
+    t_table = z_t or {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
+    n = len(rates)
+    m = float(np.mean(rates))
+    if n < 2:
+        return (m, m)
+    half = t_table.get(n - 1, 1.96) * float(np.std(rates, ddof=1)) / math.sqrt(n)
+    return (max(0.0, m - half), min(1.0, m + half))
