@@ -283,6 +283,12 @@ class TranslatorConfig(Strict):
     """Minibatch: half demonstration transitions, half X random transitions, both pairings in each half."""
     iterations: PosInt = 6_000
     """Gradient steps of G (and of D)."""
+    object_skip: bool = True
+    """G outputs the object's pose as a correction added to x^O (the object is observed alike in both domains);
+    the robot's columns have no such shortcut: the partial identity loss stays their only tie to x^Ri."""
+    hand_skip: bool = False
+    """G outputs the missing robot's end position as a correction added to the human's hand position (both are
+    positions in the same world frame, as in the paper's real-robot state)."""
     gan_loss: Literal["bce", "lsgan"] = "bce"
     """Non-saturating BCE-with-logits as in eq. 1, or least squares."""
     history_size: Annotated[int, Field(ge=0)] = 0

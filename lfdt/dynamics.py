@@ -8,7 +8,9 @@ feeds them straight to these models.
 * F^-1(y_t, y_t+1) = g([y_t, (y_t+1 - y_t) / delta_scale])  predicts the action,
 
 where ``delta_scale`` is the per-dimension standard deviation of normalised one-step changes, so
-both nets see and produce quantities of unit scale.
+both nets see and produce quantities of unit scale. F's loss is measured in these units too: in
+plain normalised units the box, which moves in a minority of random-motion transitions, would
+weigh almost nothing next to the joint velocities, and its contact dynamics would go unlearnt.
 """
 
 from __future__ import annotations
@@ -124,7 +126,8 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     for it in range(1, cfg.iterations + 1):
         idx = tr_idx[batches(len(tr_idx), cfg.batch_size, gen)]
         yb, y2b, ab = y_n[idx], y2_n[idx], a[idx]
-        loss_f = ((models.forward_model(yb, ab) - y2b) ** 2).mean()
+        # in units of one-step change, so the rarely moving box weighs as much as the arms
+        loss_f = (((models.forward_model(yb, ab) - y2b) / models.delta_scale) ** 2).mean()
         opt_f.zero_grad(set_to_none=True)
         loss_f.backward()
         opt_f.step()

@@ -32,29 +32,29 @@ METHOD_TITLES = {
 }
 
 
-def evaluation_seeds(trials: int) -> list[int]:
-    """Reset seeds of the evaluation trials (the same for every config)."""
-    return [episode_seed("evaluation", 0, "Y", i) for i in range(trials)]
+def evaluation_seeds(trials: int, purpose: str = "evaluation") -> list[int]:
+    """Reset seeds of the evaluation trials (the same for every config); 'development' gives a disjoint set."""
+    return [episode_seed(purpose, 0, "Y", i) for i in range(trials)]
 
 
 def run_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, trials: int, videos: int = 0,
-               video_dir: Path | None = None, video_size: int = 240, progress=None) -> list[dict]:
+               video_dir: Path | None = None, video_size: int = 240, progress=None,
+               purpose: str = "evaluation") -> list[dict]:
     """Run a policy in Y from the fixed start states; record per-trial outcome and the first ``videos`` as mp4."""
     results = []
-    for i, seed in enumerate(evaluation_seeds(trials)):
+    for i, seed in enumerate(evaluation_seeds(trials, purpose)):
         record = i < videos and video_dir is not None
         env = BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
                          height=video_size)
         obs, info = env.reset(seed=seed)
         frames = [env.render()] if record else []
-        success, steps = False, 0
-        for steps in range(1, env_cfg.max_episode_steps + 1):
+        success, steps, done = False, 0, False
+        while not done:
             obs, _, term, trunc, info = env.step(policy(obs))
+            steps += 1
             if record:
                 frames.append(env.render())
-            if term or trunc:
-                success = bool(term)
-                break
+            success, done = bool(term), term or trunc
         results.append({"trial": i, "seed": seed, "success": success, "steps": steps,
                         "final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
         if record:

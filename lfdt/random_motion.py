@@ -2,11 +2,11 @@
 
 The distribution: each episode starts from the task's start distribution (the same as the
 experts'), with the box moved a further U[0, box_y_spread] along the push direction so that the
-data covers the whole path to the goal; then every joint receives a command drawn uniformly from
-[-amplitude, amplitude], held for a number of control steps drawn uniformly from
-{hold_min, ..., hold_max} (independently per episode and per hold). Holding a command lets the
-heavily damped arms actually travel, so the data covers the workspace and the box gets pushed,
-not only jittered.
+data covers the whole path to the goal (box poses out of an arm's reach are drawn again); then
+every joint receives a command drawn uniformly from [-amplitude, amplitude], held for a number
+of control steps drawn uniformly from {hold_min, ..., hold_max} (independently per episode and
+per hold). Holding a command lets the heavily damped arms actually travel, so the data covers
+the workspace and the box gets pushed, not only jittered.
 
 Simulation goes through ``mujoco.rollout`` on all threads: the controls of a whole batch of
 episodes are drawn first (open loop), then MuJoCo steps them in C. The resulting states are the
@@ -38,6 +38,18 @@ def random_commands(rng: np.random.Generator, steps: int, act_dim: int, cfg: Ran
         out[t:t + hold] = rng.uniform(-cfg.amplitude, cfg.amplitude, size=act_dim)
         t += hold
     return out
+
+
+def reachable_start(scene: BoxPushModel, rng: np.random.Generator, y_spread: float,
+                    tries: int = 100) -> np.ndarray:
+    """A start with the box up to ``y_spread`` further along; draws again where an arm cannot reach the box
+    (far along the path the shorter human stand-in can run out of reach)."""
+    for _ in range(tries):
+        try:
+            return scene.sample_initial_qpos(rng, y_spread)
+        except ValueError:
+            continue
+    raise ValueError(f"no reachable start in {tries} draws with random.box_y_spread = {y_spread}")
 
 
 def initial_physics_state(scene: BoxPushModel, data_: mujoco.MjData, qpos: np.ndarray) -> np.ndarray:
@@ -94,7 +106,7 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
         qpos0, acts = [], []
         for ep in batch:
             rng = np.random.default_rng(episode_seed("random", cfg.seed, domain, ep))
-            qpos0.append(scene.sample_initial_qpos(rng, cfg.box_y_spread))
+            qpos0.append(reachable_start(scene, rng, cfg.box_y_spread))
             acts.append(random_commands(rng, cfg.episode_steps, scene.act_dim, cfg))
         obs, _ = rollout_episodes(scene, np.array(qpos0), np.array(acts), cfg.threads)
         b, t = len(batch), cfg.episode_steps

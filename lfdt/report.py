@@ -128,8 +128,8 @@ def stage_times(reports: Path) -> pd.DataFrame:
     """Wall time of every stage run that produced the current reports, summed per stage."""
     rows = []
     sources = {"train_experts": "experts/*_train.json", "collect_random": "random/*.json",
-               "collect_demos": "demos/*.json", "fit_dynamics": "dynamics.json", "train_translator": "translator/*.json",
-               "train_bc": "bc/*.json", "evaluate": "eval/*.json"}
+               "collect_demos": "demos/*.json", "fit_dynamics": "dynamics.json",
+               "train_translator": "translator/*.json", "train_bc": "bc/*.json", "evaluate": "eval/*.json"}
     for name, pattern in sources.items():
         files = [f for f in sorted(reports.glob(pattern)) if not f.name.endswith("_curve.json")]
         walls = []

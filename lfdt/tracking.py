@@ -217,3 +217,19 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
             tracker.flush()
         finally:
             _retry(lambda: client.set_terminated(run.info.run_id, status=status))
+
+
+def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:
+    """Make runs children of a parent run (the MLflow UI nests them); runs that no longer exist are skipped."""
+    import mlflow
+    from mlflow.exceptions import MlflowException
+
+    client = mlflow.MlflowClient()
+    n = 0
+    for rid in dict.fromkeys(run_ids):
+        try:
+            _retry(lambda r=rid: client.set_tag(r, "mlflow.parentRunId", parent_run_id))
+            n += 1
+        except MlflowException:
+            continue
+    return n

@@ -98,11 +98,23 @@ class Translator(nn.Module):
         self.x_norms = nn.ModuleDict({p: Normalizer(np.zeros(x_dim), np.ones(x_dim)) for p in layout.PAIRINGS})
         self.G = mlp(x_dim + len(layout.PAIRINGS), y_dim, hidden, slope)
         self.D = mlp(y_dim, 1, hidden, slope)
+        # skip connections (see skip_pairs): y_n[j] += x_n[src[j]] * scale[j] + offset[j] where src[j] >= 0
+        n_p = len(layout.PAIRINGS)
+        self.register_buffer("skip_src", torch.full((n_p, y_dim), -1, dtype=torch.long))
+        self.register_buffer("skip_scale", torch.zeros(n_p, y_dim))
+        self.register_buffer("skip_offset", torch.zeros(n_p, y_dim))
 
     def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor) -> torch.Tensor:
         """y_hat (normalised Y state) from normalised canonical x and the pairing index."""
         onehot = nnf.one_hot(pairing_idx, len(layout.PAIRINGS)).to(x_n.dtype)
-        return self.G(torch.cat([x_n, onehot], dim=-1))
+        y = self.G(torch.cat([x_n, onehot], dim=-1))
+        src = self.skip_src[pairing_idx]
+        has = src >= 0
+        if bool(has.any()):
+            copied = torch.gather(x_n, 1, src.clamp(min=0))
+            y = y + torch.where(has, copied * self.skip_scale[pairing_idx] + self.skip_offset[pairing_idx],
+                                torch.zeros_like(y))
+        return y
 
     def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
         """Normalised y_hat for raw canonical x of one pairing (no gradient)."""
@@ -112,9 +124,27 @@ class Translator(nn.Module):
             return self.generate(self.x_norms[pairing](xt), idx)
 
 
+def skip_pairs(pairing: str, object_skip: bool, hand_skip: bool) -> list[tuple[str, str]]:
+    """(x column, y column) pairs G adds to its output: quantities observed in the same world frame in X and Y.
+
+    object_skip: the object's pose (the same object, seen alike in both domains);
+    hand_skip: the human's hand position -> the end position of the robot that will stand in its place.
+    """
+    pairs = []
+    if object_skip:
+        pairs += [(c, c) for c in layout.OBJECT_COLUMNS]
+    if hand_skip:
+        missing = "r2" if layout.robot_arm(pairing) == "r1" else "r1"
+        pairs += [("h.ee_x", f"{missing}.ee_x"), ("h.ee_y", f"{missing}.ee_y")]
+    return pairs
+
+
 def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dict[str, Transitions],
-                      std_floor: float) -> None:
-    """Robot and object columns take Y's statistics; the human's come from that pairing's X random data."""
+                      std_floor: float, object_skip: bool = False, hand_skip: bool = False) -> None:
+    """Robot and object columns take Y's statistics; the human's come from that pairing's X random data.
+
+    Also sets the skip connections, converting each copied x column from its normalisation to its y column's.
+    """
     y_cols = layout.state_columns("Y")
     for pairing, tr in random_x.items():
         cols = canonical_x_columns(pairing)
@@ -126,6 +156,13 @@ def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dic
                 mean[i], std[i] = dyn.y_norm.mean[j], dyn.y_norm.std[j]
         translator.x_norms[pairing].mean.copy_(mean)
         translator.x_norms[pairing].std.copy_(std)
+        k = PAIRING_INDEX[pairing]
+        for xc, yc in skip_pairs(pairing, object_skip, hand_skip):
+            i, j = cols.index(xc), y_cols.index(yc)
+            # x_raw = x_n * std_x + mean_x; y_n = (x_raw - mean_y) / std_y
+            translator.skip_src[k, j] = i
+            translator.skip_scale[k, j] = std[i] / dyn.y_norm.std[j]
+            translator.skip_offset[k, j] = (mean[i] - dyn.y_norm.mean[j]) / dyn.y_norm.std[j]
 
 
 def _gan_losses(kind: str):
@@ -179,7 +216,7 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     for prm in dyn.parameters():
         prm.requires_grad_(False)
     tr = Translator(list(cfg.hidden))
-    fit_x_normalizers(tr, dyn, random_x, std_floor)
+    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object_skip, cfg.hand_skip)
     demo_s, rand_s = _Sampler(demos, tr, gen), _Sampler(random_x, tr, gen)
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random))
@@ -342,8 +379,8 @@ def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episod
         other = "r2" if robot == "r1" else "r1"
         s = layout.STATE_PREFIX
 
-        def xy(frame, arm):
-            return frame[[f"{s}{arm}.ee_x", f"{s}{arm}.ee_y"]].to_numpy(float)
+        def xy(frame: pd.DataFrame, arm: str) -> np.ndarray:
+            return frame[[f"{layout.STATE_PREFIX}{arm}.ee_x", f"{layout.STATE_PREFIX}{arm}.ee_y"]].to_numpy(float)
 
         out["robot_ee_error_m"] += np.linalg.norm(xy(tr, robot) - xy(src, robot), axis=1).tolist()
         out["missing_robot_ee_to_hand_m"] += np.linalg.norm(xy(tr, other) - xy(src, "h"), axis=1).tolist()

@@ -29,7 +29,8 @@ def run() -> None:
             for task in tasks:
                 member, st = bc.train_member(task, cfg, args.seed, log=lambda m, i: run.metrics(m, i), progress=bar)
                 members.append(member)
-                curves += [{"member": task.name, **{k.split("/")[-1]: v for k, v in c.items()}} for c in st.pop("curve")]
+                for c in st.pop("curve"):
+                    curves.append({"member": task.name, **{k.split("/")[-1]: v for k, v in c.items()}})
                 metrics.update({f"{task.name}/{k}": v for k, v in st.items()})
         policy = bc.BCPolicy(members)
         out = Path("models/bc") / name
