@@ -82,8 +82,8 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
     torch.set_num_threads(cfg.torch_threads)
     rng = np.random.default_rng(seed)
     gen = torch.Generator().manual_seed(seed)
-    s = task.frame[[layout.STATE_PREFIX + c for c in task.in_columns]].to_numpy(np.float32)
-    a = task.frame[[layout.ACTION_PREFIX + c for c in task.out_columns]].to_numpy(np.float32)
+    s = task.frame[[layout.STATE_PREFIX + c for c in task.in_columns]].to_numpy(np.float32, copy=True)
+    a = task.frame[[layout.ACTION_PREFIX + c for c in task.out_columns]].to_numpy(np.float32, copy=True)
     val = _split(task.frame.episode_index.to_numpy(), cfg.val_fraction, rng)
     member = BCMember(task.in_columns, task.out_columns, list(cfg.hidden))
     member.norm.load_state_dict(Normalizer.fit(s[~val], 1e-2).state_dict())
@@ -100,7 +100,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        running += float(loss)
+        running += loss.item()
         if progress is not None:
             progress.update(1)
         if it % cfg.eval_every == 0 or it == cfg.iterations:

@@ -62,9 +62,9 @@ def load_random_y(path) -> RandomY:
     cols = layout.state_columns("Y")
     df = data.read_transitions(path)
     return RandomY(
-        y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32),
-        a=df[[layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]].to_numpy(np.float32),
-        y2=df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32),
+        y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
+        a=df[[layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]].to_numpy(np.float32, copy=True),
+        y2=df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
         episode=df["episode_index"].to_numpy())
 
 

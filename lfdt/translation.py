@@ -103,11 +103,13 @@ class Translator(nn.Module):
         self.register_buffer("skip_src", torch.full((n_p, y_dim), -1, dtype=torch.long))
         self.register_buffer("skip_scale", torch.zeros(n_p, y_dim))
         self.register_buffer("skip_offset", torch.zeros(n_p, y_dim))
+        # 1 where G's own output counts, 0 where the state is copied from x (object: "copy")
+        self.register_buffer("g_mask", torch.ones(y_dim))
 
     def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor) -> torch.Tensor:
         """y_hat (normalised Y state) from normalised canonical x and the pairing index."""
         onehot = nnf.one_hot(pairing_idx, len(layout.PAIRINGS)).to(x_n.dtype)
-        y = self.G(torch.cat([x_n, onehot], dim=-1))
+        y = self.G(torch.cat([x_n, onehot], dim=-1)) * self.g_mask
         src = self.skip_src[pairing_idx]
         has = src >= 0
         if bool(has.any()):
@@ -124,14 +126,14 @@ class Translator(nn.Module):
             return self.generate(self.x_norms[pairing](xt), idx)
 
 
-def skip_pairs(pairing: str, object_skip: bool, hand_skip: bool) -> list[tuple[str, str]]:
+def skip_pairs(pairing: str, object_mode: str, hand_skip: bool) -> list[tuple[str, str]]:
     """(x column, y column) pairs G adds to its output: quantities observed in the same world frame in X and Y.
 
-    object_skip: the object's pose (the same object, seen alike in both domains);
+    object_mode 'correct' or 'copy': the object's pose (the same object, seen alike in both domains);
     hand_skip: the human's hand position -> the end position of the robot that will stand in its place.
     """
     pairs = []
-    if object_skip:
+    if object_mode in ("correct", "copy"):
         pairs += [(c, c) for c in layout.OBJECT_COLUMNS]
     if hand_skip:
         missing = "r2" if layout.robot_arm(pairing) == "r1" else "r1"
@@ -140,7 +142,7 @@ def skip_pairs(pairing: str, object_skip: bool, hand_skip: bool) -> list[tuple[s
 
 
 def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dict[str, Transitions],
-                      std_floor: float, object_skip: bool = False, hand_skip: bool = False) -> None:
+                      std_floor: float, object_mode: str = "translate", hand_skip: bool = False) -> None:
     """Robot and object columns take Y's statistics; the human's come from that pairing's X random data.
 
     Also sets the skip connections, converting each copied x column from its normalisation to its y column's.
@@ -157,12 +159,15 @@ def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dic
         translator.x_norms[pairing].mean.copy_(mean)
         translator.x_norms[pairing].std.copy_(std)
         k = PAIRING_INDEX[pairing]
-        for xc, yc in skip_pairs(pairing, object_skip, hand_skip):
+        for xc, yc in skip_pairs(pairing, object_mode, hand_skip):
             i, j = cols.index(xc), y_cols.index(yc)
             # x_raw = x_n * std_x + mean_x; y_n = (x_raw - mean_y) / std_y
             translator.skip_src[k, j] = i
             translator.skip_scale[k, j] = std[i] / dyn.y_norm.std[j]
             translator.skip_offset[k, j] = (mean[i] - dyn.y_norm.mean[j]) / dyn.y_norm.std[j]
+    if object_mode == "copy":
+        for c in layout.OBJECT_COLUMNS:
+            translator.g_mask[y_cols.index(c)] = 0.0
 
 
 def _gan_losses(kind: str):
@@ -216,7 +221,7 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     for prm in dyn.parameters():
         prm.requires_grad_(False)
     tr = Translator(list(cfg.hidden))
-    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object_skip, cfg.hand_skip)
+    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip)
     demo_s, rand_s = _Sampler(demos, tr, gen), _Sampler(random_x, tr, gen)
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random))
@@ -268,7 +273,7 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
             acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
         for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", l_dyn), ("loss/id", l_id),
                      ("loss/G_total", loss), ("D/accuracy", acc)):
-            sums[k] = sums.get(k, 0.0) + float(v)
+            sums[k] = sums.get(k, 0.0) + v.item()
         if progress is not None:
             progress.update(1)
         if it % cfg.log_every == 0 or it == cfg.iterations:

@@ -52,6 +52,11 @@ def test_cross_field_checks():
                                            "joint_range": [1, 1, 1]}}})
 
 
+def test_grid_cannot_ask_for_more_demos_than_collected():
+    with pytest.raises(ParamsError, match="grid.demos asks for 200 .* demos.per_pairing collects only 100"):
+        validate_params({"demos": {"per_pairing": 100}})
+
+
 def test_not_a_mapping_and_missing_file(tmp_path):
     with pytest.raises(ParamsError, match="mapping"):
         validate_params([1, 2])
