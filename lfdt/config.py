@@ -357,7 +357,7 @@ class Params(Strict):
     """Evaluation of the BC policies in domain Y."""
 
     @model_validator(mode="after")
-    def _enough_demos(self) -> "Params":
+    def _enough_demos(self) -> Params:
         if max(self.grid.demos) > self.demos.per_pairing:
             raise ValueError(f"grid.demos asks for {max(self.grid.demos)} demonstrations per pairing but "
                              f"demos.per_pairing collects only {self.demos.per_pairing}")
