@@ -334,6 +334,36 @@ class EvaluationConfig(Strict):
     """Video frame width and height, pixels."""
 
 
+class TwinParams(Strict):
+    """The real-robot tasks (paper §IV-E) on the MuJoCo twin (backend 'sim') or from recordings made on the
+    robots with ``python -m lfdt.robot`` (backend 'real'), with the paper's real-experiment sizes."""
+
+    backend: Literal["sim", "real"] = "sim"
+    """'sim': generate data and evaluate in the twin; 'real': read recordings and deployment logs from real_dir."""
+    real_dir: str = "data/real"
+    """Where `python -m lfdt.robot record-random/record-demos/deploy` wrote their files (backend 'real')."""
+    random_samples: PosInt = 3_300
+    """Random-motion samples per domain (the paper: 3300)."""
+    random_episode_steps: PosInt = 30
+    """Control steps per random-motion episode."""
+    random_hold_max: PosInt = 3
+    """A random target is held for 1..random_hold_max control steps."""
+    demos_per_pairing: PosInt = 10
+    """Successful demonstrations per pairing (the paper: 10 + 10)."""
+    trials: PosInt = 10
+    """Evaluation trials per task and method (the paper: 10)."""
+    videos: Annotated[int, Field(ge=0)] = 1
+    """Rollout videos per task and method."""
+    seed: Annotated[int, Field(ge=0, le=9)] = 0
+    """Data, training and translator seed."""
+    dynamics: DynamicsConfig = DynamicsConfig(batch_size=32, iterations=8_000, eval_every=1_000)
+    """Dynamics models of the twin's domain Y."""
+    translator: TranslatorConfig = TranslatorConfig(iterations=4_000)
+    """Translator of the twin (the same loss; end positions instead of joint states)."""
+    bc: BCConfig = BCConfig(iterations=4_000)
+    """Behaviour cloning on the twin."""
+
+
 class Params(Strict):
     """The whole params.yaml."""
 
@@ -355,6 +385,8 @@ class Params(Strict):
     """Behaviour cloning."""
     evaluation: EvaluationConfig = EvaluationConfig()
     """Evaluation of the BC policies in domain Y."""
+    twin: TwinParams = TwinParams()
+    """The real-robot tasks on the MuJoCo twin (or on the robots)."""
 
     @model_validator(mode="after")
     def _enough_demos(self) -> Params:

@@ -89,3 +89,58 @@ def describe() -> dict:
         "prefixes": {"state": STATE_PREFIX, "next_state": NEXT_STATE_PREFIX, "action": ACTION_PREFIX,
                      "human_action": HUMAN_ACTION_PREFIX},
     }
+
+
+class TaskLayout:
+    """The column layout of one task: state columns per arm, action columns per arm, object columns.
+
+    Domains and slots are shared by every task (:data:`DOMAIN_ARMS`); the box push of the simulated
+    experiment is :data:`BOX_PUSH`, the real-robot twin's tasks live in :mod:`lfdt.robot.twin`.
+    """
+
+    def __init__(self, name: str, arm_cols: dict[str, list[str]], action_cols: dict[str, list[str]],
+                 object_cols: list[str], position_cols: dict[str, list[str]]):
+        self.name = name
+        self.arm_cols = {k: list(v) for k, v in arm_cols.items()}
+        self.action_cols = {k: list(v) for k, v in action_cols.items()}
+        self.object_cols = list(object_cols)
+        self.position_cols = {k: list(v) for k, v in position_cols.items()}
+        """Per arm, the columns of its end (hand) position in the world frame."""
+
+    def arm_columns(self, arm: str) -> list[str]:
+        """State columns of one arm."""
+        return self.arm_cols[arm]
+
+    def arm_action_columns(self, arm: str) -> list[str]:
+        """Action columns of one arm."""
+        return self.action_cols[arm]
+
+    def state_columns(self, domain: str) -> list[str]:
+        """State columns of a domain, in observation order [slot 1, slot 2, object]."""
+        a1, a2 = DOMAIN_ARMS[domain]
+        return self.arm_cols[a1] + self.arm_cols[a2] + self.object_cols
+
+    def action_columns(self, domain: str) -> list[str]:
+        """Action columns of a domain (both slots)."""
+        a1, a2 = DOMAIN_ARMS[domain]
+        return self.action_cols[a1] + self.action_cols[a2]
+
+    def robot_y_slice(self, pairing: str) -> slice:
+        """Where the pairing's real robot sits in a Y state (y^R1 first, y^R2 second)."""
+        n = len(self.arm_cols["r1"])
+        return slice(0, n) if robot_arm(pairing) == "r1" else slice(n, 2 * n)
+
+    def canonical_x_columns(self, pairing: str) -> list[str]:
+        """A pairing's state in the translator's order: the robot that is there, the human, the object."""
+        return self.arm_cols[robot_arm(pairing)] + self.arm_cols["h"] + self.object_cols
+
+    def describe(self) -> dict:
+        """JSON-serialisable description (stored in Parquet metadata)."""
+        return {"task": self.name, "domains": {d: {"arms": list(DOMAIN_ARMS[d]), "state": self.state_columns(d),
+                                                   "action": self.action_columns(d)} for d in DOMAINS}}
+
+
+BOX_PUSH = TaskLayout("box_push", {a: arm_columns(a) for a in ARM_JOINTS},
+                      {a: arm_action_columns(a) for a in ARM_JOINTS}, list(OBJECT_COLUMNS),
+                      {a: [f"{a}.ee_x", f"{a}.ee_y"] for a in ARM_JOINTS})
+"""The simulated 2D dual-arm box push (the module-level functions above describe the same layout)."""

@@ -87,8 +87,8 @@ class TaskPlane:
 
 
 TASK_PLANES: dict[str, TaskPlane] = {
-    "block_push": TaskPlane("block_push", (0.0, 0.0, -1.0), 2, 100.0, ((130.0, 230.0), (-80.0, 80.0))),
-    "peg_insertion": TaskPlane("peg_insertion", (1.0, 0.0, 0.0), 1, 0.0, ((130.0, 210.0), (120.0, 220.0))),
+    "block_push": TaskPlane("block_push", (0.0, 0.0, -1.0), 2, 100.0, ((150.0, 230.0), (-80.0, 80.0))),
+    "peg_insertion": TaskPlane("peg_insertion", (1.0, 0.0, 0.0), 1, 0.0, ((130.0, 180.0), (120.0, 210.0))),
 }
 
 
@@ -131,14 +131,22 @@ def inverse(target_mm, tool_axis, seed_deg, dh: DH = DH(), tol_mm: float = 0.05,
 
 
 def home_angles(task: str) -> np.ndarray:
-    """A comfortable joint configuration in the middle of a task's workspace (IK seed), degrees."""
+    """A comfortable joint configuration in the middle of a task's workspace (IK seed): of the solutions from a
+    few seeds, the one farthest from the joint limits, degrees."""
     plane = TASK_PLANES[task]
-    seed = np.array([0.0, -30.0, -60.0, 0.0, 0.0, 0.0]) if task == "block_push" else np.zeros(6)
     centre = plane.to_3d(np.array([np.mean(b) for b in plane.bounds]))
-    for guess in (seed, np.array([0.0, -45.0, -45.0, -90.0, 0.0, 0.0]), np.array([0.0, -20.0, -90.0, 20.0, 90.0, 0.0]),
-                  np.array([0.0, 30.0, -120.0, 0.0, -90.0, 0.0]), np.array([0.0, -60.0, -30.0, 0.0, 90.0, 0.0])):
+    lo = np.array([lim[0] for lim in JOINT_LIMITS_DEG])
+    hi = np.array([lim[1] for lim in JOINT_LIMITS_DEG])
+    best, best_margin = None, -np.inf
+    for guess in ([0, -30, -60, 0, 0, 0], [0, -45, -45, -90, 0, 0], [0, -20, -90, 20, 90, 0],
+                  [0, 30, -120, 0, -90, 0], [0, -60, -30, 0, 90, 0], [0, 0, -90, 0, 90, 0], [0, -30, -60, -90, 90, 0]):
         try:
-            return inverse(centre, plane.tool_axis, guess)
+            q = inverse(centre, plane.tool_axis, np.asarray(guess, dtype=float))
         except ValueError:
             continue
-    raise ValueError(f"no home configuration found for {task}")
+        margin = float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+        if margin > best_margin:
+            best, best_margin = q, margin
+    if best is None:
+        raise ValueError(f"no home configuration found for {task}")
+    return best

@@ -1,0 +1,48 @@
+"""DVC stage: trials of LfDT and BC without translation on one real-robot task (twin, or the robots' deploy logs)."""
+
+import argparse
+import csv
+from pathlib import Path
+
+from lfdt import stage, tracking
+from lfdt.robot import twin, twin_pipeline
+
+
+def real_trials(task: str, real_dir: str) -> list[dict]:
+    """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots."""
+    rows = []
+    for method in twin_pipeline.METHODS:
+        path = Path(real_dir) / task / f"deploy_{method}.csv"
+        if not path.exists():
+            raise FileNotFoundError(f"backend 'real': no deployment log {path}; run `python -m lfdt.robot deploy "
+                                    f"--task {task} --method {method} ...` on the robots")
+        with open(path) as fh:
+            rows += [{"task": task, "method": method, "trial": int(r["trial"]), "success": r["success"] == "True"}
+                     for r in csv.DictReader(fh)]
+    return rows
+
+
+def run() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--task", required=True, choices=twin.TASKS)
+    ap.add_argument("--params", default="params.yaml")
+    args = ap.parse_args()
+    p = stage.params(args.params).twin
+    with tracking.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend}},
+                            tags={"task": args.task, "backend": p.backend},
+                            run_name=f"twin_evaluate-{args.task}") as run:
+        if p.backend == "real":
+            rows = real_trials(args.task, p.real_dir)
+        else:
+            rows = twin_pipeline.evaluate(args.task, p, Path("models/twin") / args.task,
+                                          video_root=Path("reports/twin/videos") / args.task)
+        summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin_pipeline.METHODS}
+        run.metrics({f"{m}/successes": v for m, v in summary.items()})
+        stage.write_json(Path("reports/twin") / f"{args.task}_eval.json",
+                         {"task": args.task, "backend": p.backend, "trials": p.trials, "successes": summary,
+                          "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
+    print(f"{args.task}: " + ", ".join(f"{m} {v}/{p.trials}" for m, v in summary.items()))
+
+
+if __name__ == "__main__":
+    stage.main(run)
