@@ -24,6 +24,7 @@ from torch import nn
 
 from lfdt import layout
 from lfdt.config import BCConfig
+from lfdt.layout import BOX_PUSH, TaskLayout
 from lfdt.nets import Normalizer, load_state, mlp, read_config, save_state
 
 
@@ -52,20 +53,19 @@ class BCTask:
 
 
 def tasks_for(method: str, translated: pd.DataFrame | None = None,
-              raw_demos: dict[str, pd.DataFrame] | None = None) -> list[BCTask]:
+              raw_demos: dict[str, pd.DataFrame] | None = None, tl: TaskLayout = BOX_PUSH) -> list[BCTask]:
     """The members a method trains, with their data."""
     if method == "bc_no_translation":
         out = []
         for pairing, df in (raw_demos or {}).items():
             robot = layout.robot_arm(pairing)
-            out.append(BCTask(f"pi_{robot}", layout.arm_columns(robot) + list(layout.OBJECT_COLUMNS),
-                              layout.arm_action_columns(robot), df))
+            out.append(BCTask(f"pi_{robot}", tl.arm_columns(robot) + tl.object_cols, tl.arm_action_columns(robot), df))
         if sorted(t.name for t in out) != ["pi_r1", "pi_r2"]:
             raise ValueError("bc_no_translation needs the raw demonstrations of both pairings")
         return out
     if translated is None:
         raise ValueError(f"{method} needs translated demonstrations")
-    return [BCTask("pi", layout.state_columns("Y"), layout.action_columns("Y"), translated)]
+    return [BCTask("pi", tl.state_columns("Y"), tl.action_columns("Y"), translated)]
 
 
 def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
@@ -124,12 +124,15 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
 
 
 class BCPolicy:
-    """A trained policy for domain Y: its members' actions, put in Y's action order."""
+    """A trained policy for domain Y: its members' actions, put in Y's action order, optionally clipped."""
 
-    def __init__(self, members: list[BCMember]):
+    def __init__(self, members: list[BCMember], tl: TaskLayout = BOX_PUSH,
+                 action_bounds: tuple[float, float] | None = (-1.0, 1.0)):
         self.members = members
-        y_cols = layout.state_columns("Y")
-        a_cols = layout.action_columns("Y")
+        self.action_bounds = action_bounds
+        y_cols = tl.state_columns("Y")
+        a_cols = tl.action_columns("Y")
+        self._n_actions = len(a_cols)
         self._in = [np.array([y_cols.index(c) for c in m.in_columns]) for m in members]
         self._out = [np.array([a_cols.index(c) for c in m.out_columns]) for m in members]
         covered = np.concatenate(self._out)
@@ -137,11 +140,11 @@ class BCPolicy:
             raise ValueError("the policy's members do not cover every action of domain Y exactly once")
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
-        act = np.zeros(len(layout.action_columns("Y")))
+        act = np.zeros(self._n_actions)
         with torch.no_grad():
             for m, i, o in zip(self.members, self._in, self._out):
                 act[o] = m(torch.as_tensor(y[i], dtype=torch.float32)[None])[0].numpy()
-        return np.clip(act, -1.0, 1.0)
+        return act if self.action_bounds is None else np.clip(act, *self.action_bounds)
 
     def save(self, out_dir: Path, config: dict) -> None:
         """One state dict per member (``<name>.pt``) with a JSON config beside it."""
@@ -150,7 +153,8 @@ class BCPolicy:
                        {**config, "member": name, "in_columns": m.in_columns, "out_columns": m.out_columns})
 
     @classmethod
-    def load(cls, model_dir: Path) -> tuple[BCPolicy, dict]:
+    def load(cls, model_dir: Path, tl: TaskLayout = BOX_PUSH,
+             action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> tuple[BCPolicy, dict]:
         """Load every member of a saved policy (``weights_only=True``)."""
         members, cfg = [], None
         for pt in sorted(Path(model_dir).glob("*.pt")):
@@ -159,4 +163,4 @@ class BCPolicy:
             members.append(load_state(m, pt))
         if not members:
             raise FileNotFoundError(f"no policy (*.pt) in {model_dir}")
-        return cls(members), cfg
+        return cls(members, tl, action_bounds), cfg

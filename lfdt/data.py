@@ -34,7 +34,7 @@ def _unit(name: str) -> str:
     q = name.split(".")[-1]
     if q.startswith("dq"):
         return "rad/s"
-    if q.startswith("q") or q == "yaw":
+    if q.startswith("q") or q in ("yaw", "pitch"):
         return "rad"
     if q.startswith("tau"):
         return "1 (normalised torque command in [-1, 1])"
@@ -43,7 +43,7 @@ def _unit(name: str) -> str:
 
 def _describe(prefix: str, name: str) -> str:
     arm, qty = name.split(".", 1)
-    who = "box" if arm == "box" else layout.ARM_TITLES[arm]
+    who = layout.ARM_TITLES.get(arm, "object" if arm == "obj" else arm)
     what = {"state.": "state at frame t", "next_state.": "state at frame t+1",
             "action.": "robot action at frame t", "human_action.": "human stand-in's action at frame t "
             "(diagnostics only: translation and BC must not read it)"}[prefix]
@@ -106,9 +106,26 @@ def write_table(table: pa.Table, path: str | Path) -> Path:
     return path
 
 
+def _first_file(path: str | Path) -> Path:
+    """A Parquet file itself, or the first file of a directory of Parquet files (a recording)."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob("*.parquet"))
+        if not files:
+            raise FileNotFoundError(f"no Parquet files in {path}")
+        return files[0]
+    return path
+
+
+def read_schema_metadata(schema: pa.Schema) -> dict:
+    """The lfdt metadata document carried by a schema."""
+    raw = (schema.metadata or {}).get(META_KEY)
+    return json.loads(raw) if raw is not None else {}
+
+
 def read_metadata(path: str | Path) -> dict:
-    """The lfdt metadata document of a Parquet file."""
-    schema = pq.read_schema(path)
+    """The lfdt metadata document of a Parquet file (or of a recording directory's files)."""
+    schema = pq.read_schema(_first_file(path))
     raw = (schema.metadata or {}).get(META_KEY)
     if raw is None:
         raise ValueError(f"{path} has no lfdt metadata: not written by lfdt.data")
@@ -116,7 +133,12 @@ def read_metadata(path: str | Path) -> dict:
 
 
 def read_transitions(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """Read a transitions file (optionally only some columns) into a DataFrame."""
+    """Read a transitions file, or a directory of per-episode files, (optionally some columns) into a DataFrame."""
+    if Path(path).is_dir():
+        files = sorted(Path(path).glob("*.parquet"))
+        if not files:
+            raise FileNotFoundError(f"no Parquet files in {path}")
+        return pd.concat([pq.read_table(f, columns=columns).to_pandas() for f in files], ignore_index=True)
     return pq.read_table(path, columns=columns).to_pandas()
 
 
@@ -130,9 +152,9 @@ def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> l
     return full
 
 
-def check_transitions(path: str | Path, kind: str, domain: str) -> dict:
+def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskLayout = layout.BOX_PUSH) -> dict:
     """Validate a transitions file's schema against the layout; returns its metadata. Raises ValueError."""
-    schema = pq.read_schema(path)
+    schema = pq.read_schema(_first_file(path))
     meta = read_metadata(path)
     problems = []
     if meta.get("kind") != kind:
@@ -140,14 +162,15 @@ def check_transitions(path: str | Path, kind: str, domain: str) -> dict:
     if meta.get("domain") != domain:
         problems.append(f"domain is {meta.get('domain')!r}, expected {domain!r}")
     expected = list(INDEX_COLUMNS)
-    expected += [layout.STATE_PREFIX + c for c in layout.state_columns(domain)]
+    expected += [layout.STATE_PREFIX + c for c in tl.state_columns(domain)]
     if kind == "random":
-        expected += [layout.ACTION_PREFIX + c for c in layout.action_columns(domain)]
+        expected += [layout.ACTION_PREFIX + c for c in tl.action_columns(domain)]
     else:
         robot = layout.robot_arm(domain)
-        expected += [layout.ACTION_PREFIX + c for c in layout.arm_action_columns(robot)]
-        expected += [layout.HUMAN_ACTION_PREFIX + c for c in layout.arm_action_columns("h")]
-    expected += [layout.NEXT_STATE_PREFIX + c for c in layout.state_columns(domain)]
+        expected += [layout.ACTION_PREFIX + c for c in tl.arm_action_columns(robot)]
+        if tl is layout.BOX_PUSH:  # the simulated human stand-in's torques are recorded; a tracked hand has none
+            expected += [layout.HUMAN_ACTION_PREFIX + c for c in tl.arm_action_columns("h")]
+    expected += [layout.NEXT_STATE_PREFIX + c for c in tl.state_columns(domain)]
     missing = [c for c in expected if c not in schema.names]
     if missing:
         problems.append(f"missing columns {missing}")
@@ -165,7 +188,7 @@ def demo_subset(path: str | Path, n: int, seed: int, purpose_key: str) -> list[i
     The draw depends only on (seed, purpose_key, the file's episodes), so translation and BC of the same
     seed use the same subset. ``n`` equal to the number available takes them all.
     """
-    episodes = np.unique(pq.read_table(path, columns=["episode_index"]).column(0).to_numpy())
+    episodes = np.unique(read_transitions(path, columns=["episode_index"]).episode_index.to_numpy())
     if n > len(episodes):
         raise ValueError(f"{n} demonstrations asked for (grid.demos) but {path} holds only {len(episodes)} "
                          f"(demos.per_pairing)")

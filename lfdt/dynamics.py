@@ -25,6 +25,7 @@ from torch import nn
 
 from lfdt import data, layout
 from lfdt.config import DynamicsConfig
+from lfdt.layout import BOX_PUSH, TaskLayout
 from lfdt.nets import Normalizer, batches, mlp
 
 
@@ -55,17 +56,19 @@ class RandomY:
     a: np.ndarray
     y2: np.ndarray
     episode: np.ndarray
+    state_columns: list[str]
+    action_columns: list[str]
 
 
-def load_random_y(path) -> RandomY:
-    """Read data/random/Y.parquet into arrays, columns selected by name."""
-    cols = layout.state_columns("Y")
+def load_random_y(path, tl: TaskLayout = BOX_PUSH) -> RandomY:
+    """Read Y's random-motion transitions (a file or a recording directory) into arrays, columns by name."""
+    cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
     df = data.read_transitions(path)
     return RandomY(
         y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
-        a=df[[layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]].to_numpy(np.float32, copy=True),
+        a=df[[layout.ACTION_PREFIX + c for c in acts]].to_numpy(np.float32, copy=True),
         y2=df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
-        episode=df["episode_index"].to_numpy())
+        episode=df["episode_index"].to_numpy(), state_columns=cols, action_columns=acts)
 
 
 def split_episodes(episode: np.ndarray, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +88,7 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     torch.set_num_threads(cfg.torch_threads)
     train, val = split_episodes(d.episode, cfg.val_fraction, cfg.seed)
     models = DynamicsModels(d.y.shape[1], d.a.shape[1], list(cfg.hidden))
-    norm = Normalizer.fit(d.y[train], cfg.std_floor, layout.state_columns("Y"))
+    norm = Normalizer.fit(d.y[train], cfg.std_floor, d.state_columns)
     models.y_norm.load_state_dict(norm.state_dict())
     with torch.no_grad():
         y_n = models.y_norm(torch.from_numpy(d.y))
@@ -116,9 +119,9 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
                 "forward_ratio": float(f_dim.mean() / triv_dim.mean()),
                 "inverse_mse": float(g_dim.mean()), "inverse_trivial_mse": float(mean_dim.mean()),
                 "inverse_ratio": float(g_dim.mean() / mean_dim.mean()),
-                "forward_mse_per_column": dict(zip(layout.state_columns("Y"), f_dim.tolist())),
-                "forward_trivial_mse_per_column": dict(zip(layout.state_columns("Y"), triv_dim.tolist())),
-                "inverse_mse_per_column": dict(zip(layout.action_columns("Y"), g_dim.tolist()))}
+                "forward_mse_per_column": dict(zip(d.state_columns, f_dim.tolist())),
+                "forward_trivial_mse_per_column": dict(zip(d.state_columns, triv_dim.tolist())),
+                "inverse_mse_per_column": dict(zip(d.action_columns, g_dim.tolist()))}
 
     curve = []
     t0 = time.perf_counter()

@@ -40,12 +40,29 @@ def evaluation_seeds(trials: int, purpose: str = "evaluation") -> list[int]:
 def run_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, trials: int, videos: int = 0,
                video_dir: Path | None = None, video_size: int = 240, progress=None,
                purpose: str = "evaluation") -> list[dict]:
-    """Run a policy in Y from the fixed start states; record per-trial outcome and the first ``videos`` as mp4."""
+    """Run a policy in the box push's Y from the fixed start states; per-trial outcome, first ``videos`` as mp4."""
+    def make_env(record: bool) -> BoxPushEnv:
+        return BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
+                          height=video_size)
+
+    results = rollout_trials(policy, make_env, trials, videos, video_dir, progress, purpose)
+    for r in results:
+        info = r.pop("final_info")
+        r.update({"final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
+    return results
+
+
+def rollout_trials(policy: Callable[[np.ndarray], np.ndarray], make_env: Callable[[bool], object], trials: int,
+                   videos: int = 0, video_dir: Path | None = None, progress=None,
+                   purpose: str = "evaluation") -> list[dict]:
+    """Run a policy in environments from ``make_env(record)`` from the fixed start states of ``purpose``.
+
+    Returns per trial: index, seed, success, steps and the last step's info (``final_info``).
+    """
     results = []
     for i, seed in enumerate(evaluation_seeds(trials, purpose)):
         record = i < videos and video_dir is not None
-        env = BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
-                         height=video_size)
+        env = make_env(record)
         obs, info = env.reset(seed=seed)
         frames = [env.render()] if record else []
         success, steps, done = False, 0, False
@@ -55,8 +72,7 @@ def run_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, t
             if record:
                 frames.append(env.render())
             success, done = bool(term), term or trunc
-        results.append({"trial": i, "seed": seed, "success": success, "steps": steps,
-                        "final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
+        results.append({"trial": i, "seed": seed, "success": success, "steps": steps, "final_info": info})
         if record:
             write_video(frames, Path(video_dir) / f"trial{i:02d}.mp4", fps=env.metadata["render_fps"])
         env.close()

@@ -35,6 +35,7 @@ from lfdt import data, layout
 from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.envs import BoxPushEnv
+from lfdt.layout import BOX_PUSH, TaskLayout
 from lfdt.nets import Normalizer, mlp
 
 METHOD_OVERRIDES: dict[str, dict[str, float]] = {
@@ -54,15 +55,9 @@ def method_config(method: str, cfg: TranslatorConfig) -> TranslatorConfig:
     return cfg.model_copy(update=METHOD_OVERRIDES[method])
 
 
-def canonical_x_columns(pairing: str) -> list[str]:
+def canonical_x_columns(pairing: str, tl: TaskLayout = BOX_PUSH) -> list[str]:
     """G's input columns of a pairing: the robot that is there, the human stand-in, the object."""
-    return layout.arm_columns(layout.robot_arm(pairing)) + layout.arm_columns("h") + list(layout.OBJECT_COLUMNS)
-
-
-def robot_y_slice(pairing: str) -> slice:
-    """Where the real robot's columns sit in a Y state (y^R1 first, y^R2 second)."""
-    n = len(layout.arm_columns("r1"))
-    return slice(0, n) if layout.robot_arm(pairing) == "r1" else slice(n, 2 * n)
+    return tl.canonical_x_columns(pairing)
 
 
 @dataclass
@@ -75,9 +70,10 @@ class Transitions:
     frame: np.ndarray
 
 
-def load_x_transitions(path, pairing: str, episodes: list[int] | None = None) -> Transitions:
+def load_x_transitions(path, pairing: str, episodes: list[int] | None = None,
+                       tl: TaskLayout = BOX_PUSH) -> Transitions:
     """State pairs of an X dataset (random or demos), canonical column order, optionally some episodes only."""
-    cols = canonical_x_columns(pairing)
+    cols = tl.canonical_x_columns(pairing)
     names = ["episode_index", "frame_index"] + [layout.STATE_PREFIX + c for c in cols] + \
         [layout.NEXT_STATE_PREFIX + c for c in cols]
     df = data.read_transitions(path, columns=names)
@@ -92,9 +88,10 @@ def load_x_transitions(path, pairing: str, episodes: list[int] | None = None) ->
 class Translator(nn.Module):
     """G, D and the X normalisers of both pairings, saved as one state dict."""
 
-    def __init__(self, hidden: list[int], y_dim: int = 19, slope: float = 0.2):
+    def __init__(self, hidden: list[int], tl: TaskLayout = BOX_PUSH, slope: float = 0.2):
         super().__init__()
-        x_dim = len(canonical_x_columns("R1H"))
+        x_dim = len(tl.canonical_x_columns("R1H"))
+        y_dim = len(tl.state_columns("Y"))
         self.x_norms = nn.ModuleDict({p: Normalizer(np.zeros(x_dim), np.ones(x_dim)) for p in layout.PAIRINGS})
         self.G = mlp(x_dim + len(layout.PAIRINGS), y_dim, hidden, slope)
         self.D = mlp(y_dim, 1, hidden, slope)
@@ -126,7 +123,7 @@ class Translator(nn.Module):
             return self.generate(self.x_norms[pairing](xt), idx)
 
 
-def skip_pairs(pairing: str, object_mode: str, hand_skip: bool) -> list[tuple[str, str]]:
+def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout = BOX_PUSH) -> list[tuple[str, str]]:
     """(x column, y column) pairs G adds to its output: quantities observed in the same world frame in X and Y.
 
     object_mode 'correct' or 'copy': the object's pose (the same object, seen alike in both domains);
@@ -134,22 +131,23 @@ def skip_pairs(pairing: str, object_mode: str, hand_skip: bool) -> list[tuple[st
     """
     pairs = []
     if object_mode in ("correct", "copy"):
-        pairs += [(c, c) for c in layout.OBJECT_COLUMNS]
+        pairs += [(c, c) for c in tl.object_cols]
     if hand_skip:
         missing = "r2" if layout.robot_arm(pairing) == "r1" else "r1"
-        pairs += [("h.ee_x", f"{missing}.ee_x"), ("h.ee_y", f"{missing}.ee_y")]
+        pairs += list(zip(tl.position_cols["h"], tl.position_cols[missing]))
     return pairs
 
 
 def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dict[str, Transitions],
-                      std_floor: float, object_mode: str = "translate", hand_skip: bool = False) -> None:
+                      std_floor: float, object_mode: str = "translate", hand_skip: bool = False,
+                      tl: TaskLayout = BOX_PUSH) -> None:
     """Robot and object columns take Y's statistics; the human's come from that pairing's X random data.
 
     Also sets the skip connections, converting each copied x column from its normalisation to its y column's.
     """
-    y_cols = layout.state_columns("Y")
+    y_cols = tl.state_columns("Y")
     for pairing, tr in random_x.items():
-        cols = canonical_x_columns(pairing)
+        cols = tl.canonical_x_columns(pairing)
         own = Normalizer.fit(tr.x, std_floor)
         mean, std = own.mean.clone(), own.std.clone()
         for i, c in enumerate(cols):
@@ -159,14 +157,14 @@ def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dic
         translator.x_norms[pairing].mean.copy_(mean)
         translator.x_norms[pairing].std.copy_(std)
         k = PAIRING_INDEX[pairing]
-        for xc, yc in skip_pairs(pairing, object_mode, hand_skip):
+        for xc, yc in skip_pairs(pairing, object_mode, hand_skip, tl):
             i, j = cols.index(xc), y_cols.index(yc)
             # x_raw = x_n * std_x + mean_x; y_n = (x_raw - mean_y) / std_y
             translator.skip_src[k, j] = i
             translator.skip_scale[k, j] = std[i] / dyn.y_norm.std[j]
             translator.skip_offset[k, j] = (mean[i] - dyn.y_norm.mean[j]) / dyn.y_norm.std[j]
     if object_mode == "copy":
-        for c in layout.OBJECT_COLUMNS:
+        for c in tl.object_cols:
             translator.g_mask[y_cols.index(c)] = 0.0
 
 
@@ -212,7 +210,8 @@ class _Sampler:
 
 def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
                      dyn: DynamicsModels, cfg: TranslatorConfig, seed: int, std_floor: float = 1e-2,
-                     log: Callable[[dict, int], None] | None = None, progress=None) -> tuple[Translator, dict]:
+                     log: Callable[[dict, int], None] | None = None, progress=None,
+                     tl: TaskLayout = BOX_PUSH) -> tuple[Translator, dict]:
     """Train G and D with eq. 6 (frozen F, F^-1). Returns the translator and training statistics."""
     torch.manual_seed(seed)
     torch.set_num_threads(cfg.torch_threads)
@@ -220,8 +219,8 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     dyn = dyn.eval()
     for prm in dyn.parameters():
         prm.requires_grad_(False)
-    tr = Translator(list(cfg.hidden))
-    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip)
+    tr = Translator(list(cfg.hidden), tl)
+    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl)
     demo_s, rand_s = _Sampler(demos, tr, gen), _Sampler(random_x, tr, gen)
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random))
@@ -229,10 +228,10 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     opt_d = torch.optim.Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
     quarter = max(1, cfg.batch_size // 4)
-    robot_mask = torch.zeros(len(layout.PAIRINGS), 19, dtype=torch.bool)
+    robot_mask = torch.zeros(len(layout.PAIRINGS), len(tl.state_columns("Y")), dtype=torch.bool)
     for p, i in PAIRING_INDEX.items():
-        robot_mask[i, robot_y_slice(p)] = True
-    n_robot = len(layout.arm_columns("r1"))
+        robot_mask[i, tl.robot_y_slice(p)] = True
+    n_robot = len(tl.arm_cols["r1"])
     history: list[torch.Tensor] = []
     dyn_scale = dyn.delta_scale if cfg.dyn_scale == "delta" else torch.ones_like(dyn.delta_scale)
     sums: dict[str, float] = {}
@@ -289,14 +288,18 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
 
 
 def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, str], episodes: dict[str, list[int]],
-                    cfg: TranslatorConfig, dt: float) -> pd.DataFrame:
-    """Translate every chosen demonstration of both pairings into Y states with BC action labels (raw units)."""
-    y_cols = layout.state_columns("Y")
-    a_cols = layout.action_columns("Y")
+                    cfg: TranslatorConfig, dt: float, tl: TaskLayout = BOX_PUSH,
+                    action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> pd.DataFrame:
+    """Translate every chosen demonstration of both pairings into Y states with BC action labels (raw units).
+
+    ``action_bounds`` clips the inverse model's labels to the action space (None: no clipping).
+    """
+    y_cols = tl.state_columns("Y")
+    a_cols = tl.action_columns("Y")
     frames = []
     ep_out = 0
     for pairing, path in demos_path.items():
-        cols = canonical_x_columns(pairing)
+        cols = tl.canonical_x_columns(pairing)
         df = data.read_transitions(path)
         df = df[df.episode_index.isin(episodes[pairing])]
         robot = layout.robot_arm(pairing)
@@ -306,11 +309,15 @@ def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, s
             x_last = g[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32)[-1:]
             y_n = tr.translate(np.concatenate([x, x_last]), pairing)
             with torch.no_grad():
-                a_hat = torch.clamp(dyn.inverse_model(y_n[:-1], y_n[1:]), -1.0, 1.0).numpy()
+                a_hat = dyn.inverse_model(y_n[:-1], y_n[1:])
+                if action_bounds is not None:
+                    a_hat = torch.clamp(a_hat, *action_bounds)
+                a_hat = a_hat.numpy()
                 y = dyn.y_norm.inverse(y_n).numpy()
             if cfg.labels == "recorded_robot":
-                rec = g[[layout.ACTION_PREFIX + c for c in layout.arm_action_columns(robot)]].to_numpy()
-                sl = slice(0, 3) if robot == "r1" else slice(3, 6)
+                rec = g[[layout.ACTION_PREFIX + c for c in tl.arm_action_columns(robot)]].to_numpy()
+                n_a = len(tl.arm_action_columns("r1"))
+                sl = slice(0, n_a) if robot == "r1" else slice(n_a, 2 * n_a)
                 a_hat[:, sl] = rec
             out = pd.DataFrame(y[:-1], columns=[layout.STATE_PREFIX + c for c in y_cols])
             out[[layout.ACTION_PREFIX + c for c in a_cols]] = a_hat
@@ -325,10 +332,10 @@ def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, s
     return pd.concat(frames, ignore_index=True)
 
 
-def translated_table(df: pd.DataFrame, metadata: dict) -> pa.Table:
+def translated_table(df: pd.DataFrame, metadata: dict, tl: TaskLayout = BOX_PUSH) -> pa.Table:
     """The translated demonstrations as a documented Arrow table (Y layout, same conventions as every dataset)."""
     schema = data.transitions_schema(
-        layout.state_columns("Y"), layout.action_columns("Y"),
+        tl.state_columns("Y"), tl.action_columns("Y"),
         extra={"source_pairing": (pa.string(), "pairing of domain X the demonstration was translated from"),
                "source_episode_index": (pa.int64(), "episode_index of the source demonstration in data/demos")},
         metadata=metadata)
@@ -368,10 +375,11 @@ def replay_check(df: pd.DataFrame, env_cfg: EnvConfig) -> dict:
             "replay_success_rate": float(np.mean(solved)), "replayed_demos": len(pos_err)}
 
 
-def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episodes: dict[str, list[int]]) -> dict:
+def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episodes: dict[str, list[int]],
+                            tl: TaskLayout = BOX_PUSH) -> dict:
     """Compare translated states with the source where they should agree (diagnostics only, never trained on).
 
-    * the real robot's end position, and the box pose (m, rad): translation should keep them;
+    * the real robot's end position, and the object's pose (m, rad): translation should keep them;
     * the translated missing robot's end position vs the human's hand (m): where the push happens.
     """
     out: dict[str, list[float]] = {"robot_ee_error_m": [], "box_position_error_m": [], "box_yaw_error_rad": [],
@@ -385,12 +393,12 @@ def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episod
         s = layout.STATE_PREFIX
 
         def xy(frame: pd.DataFrame, arm: str) -> np.ndarray:
-            return frame[[f"{layout.STATE_PREFIX}{arm}.ee_x", f"{layout.STATE_PREFIX}{arm}.ee_y"]].to_numpy(float)
+            return frame[[layout.STATE_PREFIX + c for c in tl.position_cols[arm]]].to_numpy(float)
 
         out["robot_ee_error_m"] += np.linalg.norm(xy(tr, robot) - xy(src, robot), axis=1).tolist()
         out["missing_robot_ee_to_hand_m"] += np.linalg.norm(xy(tr, other) - xy(src, "h"), axis=1).tolist()
-        box_t = tr[[s + c for c in layout.OBJECT_COLUMNS]].to_numpy(float)
-        box_s = src[[s + c for c in layout.OBJECT_COLUMNS]].to_numpy(float)
+        box_t = tr[[s + c for c in tl.object_cols]].to_numpy(float)
+        box_s = src[[s + c for c in tl.object_cols]].to_numpy(float)
         out["box_position_error_m"] += np.linalg.norm(box_t[:, :2] - box_s[:, :2], axis=1).tolist()
         out["box_yaw_error_rad"] += np.abs(box_t[:, 2] - box_s[:, 2]).tolist()
     return {f"diag/{k}": float(np.mean(v)) for k, v in out.items()}

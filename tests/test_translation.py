@@ -26,7 +26,7 @@ def test_canonical_columns_and_robot_slot():
         cols = translation.canonical_x_columns(p)
         assert cols[:8] == layout.arm_columns(layout.robot_arm(p)) and cols[8:18] == layout.arm_columns("h")
         y = layout.state_columns("Y")
-        assert y[translation.robot_y_slice(p)] == layout.arm_columns(layout.robot_arm(p))
+        assert y[layout.BOX_PUSH.robot_y_slice(p)] == layout.arm_columns(layout.robot_arm(p))
 
 
 @pytest.fixture(scope="module")
