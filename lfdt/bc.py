@@ -7,7 +7,8 @@ action columns of domain Y:
 * BC without translation (paper §IV-C): pi^R1(x^R1, x^O) from R1H's raw demonstrations with the
   recorded robot action, pi^R2(x^R2, x^O) from HR2's, run side by side in Y.
 
-Inputs are z-scored with the statistics of each member's own training data (std floor 1e-2).
+Inputs and actions are z-scored with the statistics of each member's own training data (std floors 1e-2 and
+1e-4); the loss is measured in normalised action units.
 """
 
 from __future__ import annotations
@@ -36,10 +37,16 @@ class BCMember(nn.Module):
         self.in_columns = list(in_columns)
         self.out_columns = list(out_columns)
         self.norm = Normalizer(np.zeros(len(in_columns)), np.ones(len(in_columns)))
+        self.act_norm = Normalizer(np.zeros(len(out_columns)), np.ones(len(out_columns)))
         self.net = mlp(len(in_columns), len(out_columns), hidden)
 
     def forward(self, s: torch.Tensor) -> torch.Tensor:
-        return self.net(self.norm(s))
+        """The action (raw units) for raw states."""
+        return self.act_norm.inverse(self.net(self.norm(s)))
+
+    def loss(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+        """Mean squared error in normalised action units (every action dimension weighs alike)."""
+        return ((self.net(self.norm(s)) - self.act_norm(a)) ** 2).mean()
 
 
 @dataclass
@@ -87,6 +94,8 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
     val = _split(task.frame.episode_index.to_numpy(), cfg.val_fraction, rng)
     member = BCMember(task.in_columns, task.out_columns, list(cfg.hidden))
     member.norm.load_state_dict(Normalizer.fit(s[~val], 1e-2).state_dict())
+    # actions can be torques in [-1, 1] or displacements of a few millimetres: both are learnt at unit scale
+    member.act_norm.load_state_dict(Normalizer.fit(a[~val], 1e-4).state_dict())
     s_t, a_t = torch.from_numpy(s), torch.from_numpy(a)
     tr_idx = torch.from_numpy(np.flatnonzero(~val))
     va_idx = torch.from_numpy(np.flatnonzero(val))
@@ -96,7 +105,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
         idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)]
-        loss = ((member(s_t[idx]) - a_t[idx]) ** 2).mean()
+        loss = member.loss(s_t[idx], a_t[idx])
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -107,7 +116,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
             n = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
             with torch.no_grad():
                 sel = va_idx if len(va_idx) else tr_idx
-                v = float(((member(s_t[sel]) - a_t[sel]) ** 2).mean())
+                v = float(member.loss(s_t[sel], a_t[sel]))
             point = {f"{task.name}/train_loss": running / n, f"{task.name}/val_loss": v}
             running = 0.0
             curve.append({"iteration": it, **point})
