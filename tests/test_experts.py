@@ -63,7 +63,7 @@ def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
 @pytest.mark.slow
 def test_killed_training_resumes_where_it_stopped(tmp_path):
     params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
-              "demos": {"per_pairing": 1, "success_only": False}}
+              "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]}}
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
     cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--pairing", "R1H"]
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path / 'mlflow.db'}"}

@@ -56,7 +56,9 @@ def test_every_stage_ran(project):
     _, out = project
     stages = ["train_experts@R1H", "train_experts@HR2", "collect_random@Y", "collect_random@R1H",
               "collect_random@HR2", "collect_demos@R1H", "collect_demos@HR2", "summarize_experts", "fit_dynamics",
-              "select_demos@3-0", "report"]
+              "select_demos@3-0", "report", "twin_report"]
+    stages += [f"{s}@{t}" for s in ("twin_collect", "twin_train", "twin_evaluate")
+               for t in ("block_push", "peg_insertion")]
     stages += [f"train_translator@{m}-3-0" for m in METHODS[1:]]
     stages += [f"{s}@{m}-3-0" for s in ("train_bc", "evaluate") for m in METHODS]
     for stage in stages:
@@ -185,6 +187,22 @@ def test_mlflow_server_serves_the_pipeline_runs(project):
         except subprocess.TimeoutExpired:
             os.killpg(server.pid, signal.SIGKILL)
             server.wait()
+
+
+def test_twin_pipeline_outputs(project):
+    dst, _ = project
+    runs = (dst / "reports/twin_runs.csv").read_text().splitlines()
+    assert runs[0] == "task,method,trial,success"
+    rows = [r.split(",") for r in runs[1:]]
+    assert {(r[0], r[1]) for r in rows} == {(t, m) for t in ("block_push", "peg_insertion")
+                                            for m in ("bc_no_translation", "lfdt")}
+    assert len(rows) == 2 * 2 * 2 and {r[3] for r in rows} <= {"True", "False"}
+    md = (dst / "reports/twin.md").read_text()
+    assert "paper (real robots)" in md and "10/10" in md and "8/10" in md
+    for task in ("block_push", "peg_insertion"):
+        files = sorted((dst / f"data/twin/{task}/demos_R1H").glob("episode_*.parquet"))
+        assert len(files) == 2
+        assert (dst / f"models/twin/{task}/lfdt").is_dir() and (dst / f"models/twin/{task}/translator.pt").exists()
 
 
 def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(project):
