@@ -63,6 +63,14 @@ def wall_since_start() -> float:
     return time.time() - psutil.Process().create_time()
 
 
+def add_config_arguments(ap, methods) -> None:
+    """``--method``, ``--demos``, ``--seed`` (one matrix instance) and ``--params``."""
+    ap.add_argument("--method", required=True, choices=sorted(methods))
+    ap.add_argument("--demos", required=True, type=int)
+    ap.add_argument("--seed", required=True, type=int)
+    ap.add_argument("--params", default="params.yaml")
+
+
 def config_name(method: str, demos: int, seed: int) -> str:
     """Name of one (method, demos, seed) configuration in file and run names."""
     return f"{method}-d{demos}-s{seed}"

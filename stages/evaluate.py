@@ -7,13 +7,12 @@ import numpy as np
 
 from lfdt import bc, evaluation, stage, tracking
 
+BC_METHODS = ("bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id")
+
 
 def run() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--method", required=True, choices=["bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id"])
-    ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--seed", required=True, type=int)
-    ap.add_argument("--params", default="params.yaml")
+    stage.add_config_arguments(ap, BC_METHODS)
     args = ap.parse_args()
     p = stage.params(args.params)
     cfg = p.evaluation

@@ -5,13 +5,12 @@ from pathlib import Path
 
 from lfdt import bc, data, layout, stage, tracking
 
+BC_METHODS = ("bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id")
+
 
 def run() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--method", required=True, choices=["bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id"])
-    ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--seed", required=True, type=int)
-    ap.add_argument("--params", default="params.yaml")
+    stage.add_config_arguments(ap, BC_METHODS)
     args = ap.parse_args()
     cfg = stage.params(args.params).bc
     name = stage.config_name(args.method, args.demos, args.seed)

@@ -12,10 +12,7 @@ from lfdt.nets import load_state, read_config, save_state
 
 def run() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--method", required=True, choices=sorted(translation.METHOD_OVERRIDES))
-    ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--seed", required=True, type=int)
-    ap.add_argument("--params", default="params.yaml")
+    stage.add_config_arguments(ap, translation.METHOD_OVERRIDES)
     args = ap.parse_args()
     p = stage.params(args.params)
     cfg = translation.method_config(args.method, p.translator)
