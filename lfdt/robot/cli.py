@@ -5,13 +5,22 @@ bound with ``set_defaults(func=...)``. Exit codes: 0 done; 2 bad arguments (argp
 (SafetyError) or an arm that does not answer (ArmNotResponding); anything else propagates with a traceback.
 
 Try it without hardware: ``python -m lfdt.robot.fake_mycobot --pty`` prints a device path to pass as ``--port``.
+
+The data and deployment commands (``calibrate``, ``write-rig-config``, ``record-random``, ``record-demos``, ``deploy``)
+work on a whole rig (:mod:`lfdt.robot.rig`: both arms and the camera, described by a JSON file) or, with ``--sim``,
+on the MuJoCo twin. They stop the arms on Ctrl-C (exit 130) and on any error; recordings keep only finished
+episodes (each written atomically when it ends), so an interrupted or killed recording leaves complete files only.
+Exit code 2 also covers a refused target, lost tracking and an unusable rig config.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from lfdt.robot.arm import (
     ArmNotResponding,
@@ -19,12 +28,17 @@ from lfdt.robot.arm import (
     SafeArm,
     SafetyError,
     SafetyLimits,
+    TrackingLost,
     check_command,
     stop_on_interrupt,
 )
 
 EXIT_FAILED = 2
 """A refused command or an arm that does not answer (the same code argparse uses for bad arguments)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (128 + SIGINT), as shells report it."""
+TASKS = ("block_push", "peg_insertion")
+METHODS = ("bc_no_translation", "lfdt")
 
 MOVE_LIMITS = SafetyLimits(max_step_deg=None)
 """``move``: joint limits, speed and the default workspace box (flange 40 mm or more above the mounting surface,
@@ -102,6 +116,443 @@ def run_move(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------------------------------
+# calibration and rig configuration
+
+
+def _camera_source(text: str) -> int | str:
+    """A camera index ("0") or a video path."""
+    return int(text) if text.isdigit() else text
+
+
+def add_calibrate_parser(subparsers) -> None:
+    """Register ``calibrate``."""
+    p = subparsers.add_parser("calibrate", help="calibrate the camera from views of a chessboard (or ChArUco board)",
+                              description="Grab views of a printed board from a camera or a video, calibrate the "
+                                          "intrinsics and distortion, save them as JSON and print the RMS "
+                                          "reprojection error. Move the board around (tilted, near the corners) "
+                                          "while frames are grabbed. Exit 2 when too few views show the board.")
+    p.add_argument("--camera", required=True, metavar="SRC", help="camera index (e.g. 0) or a video file")
+    p.add_argument("--pattern", type=int, nargs=2, required=True, metavar=("COLS", "ROWS"),
+                   help="chessboard: inner corners per row and column; with --charuco: squares")
+    p.add_argument("--square", type=float, required=True, metavar="M", help="square edge, metres")
+    p.add_argument("--charuco", action="store_true", help="the board is a ChArUco board (AprilTag 36h11 markers)")
+    p.add_argument("--marker", type=float, metavar="M", help="ChArUco marker edge, metres (with --charuco)")
+    p.add_argument("--frames", type=int, default=20, metavar="N", help="views to grab (default: 20)")
+    p.add_argument("--every", type=float, default=0.5, metavar="S",
+                   help="seconds between grabbed views (camera time, or video time for a file; default: 0.5)")
+    p.add_argument("--min-views", type=int, default=6, metavar="N",
+                   help="fewest views with the board needed to calibrate (default: 6)")
+    p.add_argument("--out", required=True, type=Path, metavar="CALIB_JSON", help="calibration JSON to write")
+    p.set_defaults(func=run_calibrate)
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Grab, calibrate, save; exit 2 with a message when the board was seen in fewer than --min-views views."""
+    from lfdt.robot import calibration
+    from lfdt.robot.tracker import open_capture
+
+    if args.charuco and args.marker is None:
+        print("error: --charuco needs --marker (marker edge in metres)", file=sys.stderr)
+        return EXIT_FAILED
+    source = _camera_source(args.camera)
+    try:
+        cap = open_capture(source)
+    except (FileNotFoundError, RuntimeError) as e:
+        print(f"error: cannot open camera {args.camera}: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"grabbing up to {args.frames} views of the board, {args.every:g} s apart; move the board around",
+          file=sys.stderr)
+    try:
+        frames = calibration.collect_frames(
+            cap, args.frames, args.every, pattern=None if args.charuco else tuple(args.pattern),
+            time_base="wall" if isinstance(source, int) else "video")
+    finally:
+        cap.release()
+    board = None
+    try:
+        if args.charuco:
+            board = calibration.make_charuco_board(tuple(args.pattern), args.square, args.marker)
+            calib = calibration.calibrate_charuco(frames, board)
+        else:
+            calib = calibration.calibrate_chessboard(frames, tuple(args.pattern), args.square)
+    except ValueError as e:  # no frames, or fewer than 3 usable views
+        calib, reason = None, str(e)
+    if calib is None or calib.n_views < args.min_views:
+        seen = 0 if calib is None else calib.n_views
+        what = "ChArUco board" if board is not None else f"{args.pattern[0]}x{args.pattern[1]} chessboard"
+        print(f"error: the {what} was usable in {seen} views ({len(frames)} frames grabbed), {args.min_views} "
+              f"needed" + (f" ({reason})" if calib is None else "") + "; nothing was saved", file=sys.stderr)
+        return EXIT_FAILED
+    calibration.save_calibration(args.out, calib)
+    k = calib.camera_matrix
+    print(f"calibrated from {calib.n_views} views: RMS reprojection error {calib.rms_px:.3f} px; "
+          f"fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} cx {k[0, 2]:.1f} cy {k[1, 2]:.1f}; saved {args.out}")
+    return 0
+
+
+def add_write_rig_config_parser(subparsers) -> None:
+    """Register ``write-rig-config``."""
+    p = subparsers.add_parser("write-rig-config", help="write an example rig configuration to edit",
+                              description="Write a documented example rig configuration (both arms, the camera, "
+                                          "the control loop) as JSON; edit ports, base poses and tag poses to "
+                                          "match your setup.")
+    p.add_argument("--out", required=True, type=Path, metavar="RIG_JSON", help="JSON file to write")
+    p.add_argument("--task", choices=TASKS, default="block_push", help="task of the example (default: block_push)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=run_write_rig_config)
+
+
+def run_write_rig_config(args: argparse.Namespace) -> int:
+    """Write the example; exit 2 when the file exists and --force is not given."""
+    from lfdt.robot.rig import write_rig_config
+
+    try:
+        path = write_rig_config(args.out, args.task, overwrite=args.force)
+    except FileExistsError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"wrote {path}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# recording and deployment on a rig
+
+
+def add_rig_arguments(parser: argparse.ArgumentParser, task_required: bool = False) -> None:
+    """``--rig``, ``--sim``, ``--task``, ``--step-delay``, ``--yes`` shared by the rig commands."""
+    parser.add_argument("--rig", type=Path, metavar="RIG_JSON", help="rig configuration (write-rig-config); "
+                        "required unless --sim")
+    parser.add_argument("--sim", action="store_true", help="run on the MuJoCo twin instead of the robots")
+    parser.add_argument("--task", choices=TASKS, required=task_required,
+                        help="the task (must match the rig's)" if task_required else
+                        "task of the twin (with --sim and no --rig); otherwise the rig's")
+    parser.add_argument("--step-delay", type=float, default=0.0, metavar="S",
+                        help="--sim: sleep S seconds per step, to pace a dry run like the robots (default: 0)")
+
+
+def _rig_task(args: argparse.Namespace):
+    """The task and the rig config (None with --sim and no --rig); exit-2 errors as RigConfigError."""
+    from lfdt.robot.rig import RigConfigError, load_rig_config
+
+    config = None
+    if args.rig is not None:
+        config = load_rig_config(args.rig)
+    elif not args.sim:
+        raise RigConfigError("--rig RIG_JSON is required (or --sim for the twin)")
+    if config is not None and args.task is not None and args.task != config.task:
+        raise RigConfigError(f"--task {args.task} but {args.rig} is set up for {config.task}")
+    task = args.task or (config.task if config is not None else None)
+    if task is None:
+        raise RigConfigError("--sim without --rig needs --task")
+    return task, config
+
+
+def _make_rig(args: argparse.Namespace, task: str, config, domain: str, human: str, seed: int,
+              max_steps: int | None = None):
+    from lfdt.robot.rig import RealRig, SimRig
+
+    if args.sim:
+        return SimRig(task, domain, seed=seed, human=human, step_delay=args.step_delay, max_steps=max_steps)
+    return RealRig(config, domain)
+
+
+def _ask_yes_no(question: str) -> bool:
+    """Ask the operator on stdin until they answer y or n."""
+    while True:
+        answer = input(f"{question} [y/n] ").strip().lower()
+        if answer in ("y", "yes"):
+            return True
+        if answer in ("n", "no"):
+            return False
+
+
+def _wait_for_operator(rig, prompt: str, skip: bool) -> None:
+    """Real robots: let the operator set the scene before an episode (unless --yes)."""
+    from lfdt.robot.rig import RealRig
+
+    if isinstance(rig, RealRig) and not skip:
+        input(f"{prompt}; press Enter to start ")
+
+
+def _episodes_in(directory: Path) -> int:
+    from lfdt.robot.recording import EPISODE_GLOB
+
+    return len(list(Path(directory).glob(EPISODE_GLOB)))
+
+
+def _metadata(args: argparse.Namespace, config, **extra) -> dict:
+    meta = {"source": "twin" if args.sim else "robots", **extra}
+    if config is not None and not args.sim:
+        meta["rig"] = config.model_dump(mode="json", by_alias=True)
+    return meta
+
+
+def _progress(total: int, unit: str, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True)
+
+
+def _record_loop(rig, rec, out: Path, episodes: int, unit: str, run_episode) -> int:
+    """Run ``run_episode()`` (True: an episode was kept) until ``episodes`` are kept; Ctrl-C and errors leave the
+    finished episodes and drop the one in progress."""
+    from lfdt.robot.rig import running
+
+    bar = _progress(episodes, unit, out.name)
+    try:
+        with running(rig), bar:
+            while bar.n < episodes:
+                if run_episode():
+                    bar.update(1)
+    except KeyboardInterrupt:
+        rec.abort()
+        print(f"interrupted: arms stopped; {_episodes_in(out)} finished episodes in {out}, the episode in "
+              f"progress was dropped", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BaseException:
+        rec.abort()
+        print(f"stopped: {_episodes_in(out)} finished episodes in {out}, the episode in progress was dropped",
+              file=sys.stderr)
+        raise
+    return 0
+
+
+def add_record_random_parser(subparsers) -> None:
+    """Register ``record-random``."""
+    p = subparsers.add_parser("record-random", help="record random motion of the robots (dynamics data)",
+                              description="Random motion in one domain: each robot's target is a random offset "
+                                          "of up to --reach from its end, held for 1..--hold-max steps (as "
+                                          "twin.random_action); the person moves freely (robots) or randomly "
+                                          "(--sim). One Parquet file per episode under --out (twin_schema "
+                                          "'random'); the human slot's action is its measured motion (robots) "
+                                          "or its random target (--sim). Episodes already in --out are kept "
+                                          "and numbering continues.")
+    add_rig_arguments(p)
+    p.add_argument("--domain", required=True, choices=("Y", "R1H", "HR2"))
+    p.add_argument("--episodes", type=int, required=True, metavar="N", help="episodes to record")
+    p.add_argument("--steps", type=int, required=True, metavar="T", help="control steps per episode")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
+    p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
+    p.add_argument("--reach", type=float, default=0.008, metavar="M",
+                   help="largest random offset per axis, metres (default: 0.008)")
+    p.add_argument("--hold-max", type=int, default=3, metavar="K", help="hold a target 1..K steps (default: 3)")
+    p.add_argument("--human", choices=("random", "scripted"), default="random",
+                   help="--sim in R1H/HR2: how the twin's person moves (default: random)")
+    p.add_argument("--yes", action="store_true", help="robots: start each episode without waiting for Enter")
+    p.set_defaults(func=run_record_random)
+
+
+def run_record_random(args: argparse.Namespace) -> int:
+    """Record ``--episodes`` episodes of ``--steps`` random steps; returns 0, or 130 on Ctrl-C."""
+    import numpy as np
+
+    from lfdt.robot import twin
+    from lfdt.robot.recording import EpisodeRecorder
+    from lfdt.seeding import episode_seed
+
+    task, config = _rig_task(args)
+    rig = _make_rig(args, task, config, args.domain, args.human, args.seed)
+    meta = _metadata(args, config, seed=args.seed, steps=args.steps, reach=args.reach, hold_max=args.hold_max)
+    rec = EpisodeRecorder(args.out, twin.twin_schema(task, args.domain, "random", meta), rig.control_dt)
+
+    def episode() -> bool:
+        index = rec.start()
+        s = episode_seed("random", args.seed, args.domain, index)
+        rng = np.random.default_rng(s)
+        obs = rig.reset(seed=s)
+        _wait_for_operator(rig, f"episode {index}: robots at their start poses", args.yes)
+        rel, hold = {}, 0
+        for _ in range(args.steps):
+            if hold == 0:
+                rel = {r: rng.uniform(-args.reach, args.reach, size=2) for r in rig.robots}
+                hold = int(rng.integers(1, args.hold_max + 1))
+            rig.act(rel)
+            nxt = rig.observe()
+            action = np.zeros((2, 2))
+            for slot, arm in enumerate(rig.slots):
+                action[slot] = rig.human_action(obs, nxt) if arm == "h" else rel[arm]
+            rec.add(obs, action.reshape(-1), nxt)
+            obs, hold = nxt, hold - 1
+        rec.finish()
+        return True
+
+    code = _record_loop(rig, rec, args.out, args.episodes, "episode", episode)
+    if code == 0:
+        print(f"recorded {args.episodes} episodes of {args.steps} steps in {args.out} "
+              f"({_episodes_in(args.out)} in all)")
+    return code
+
+
+def add_record_demos_parser(subparsers) -> None:
+    """Register ``record-demos``."""
+    p = subparsers.add_parser("record-demos", help="record demonstrations with one robot and a person",
+                              description="Demonstrations in domain X: the pairing's robot replays the programmed "
+                                          "motion (twin.ProgrammedMotion) while the person's hand is tracked; "
+                                          "after each episode the operator says whether it succeeded (--sim: "
+                                          "the twin's success flag; --yes: keep every episode). Successful "
+                                          "episodes are kept (one Parquet file each, twin_schema 'demos'), "
+                                          "the others dropped.")
+    add_rig_arguments(p)
+    p.add_argument("--pairing", required=True, choices=("R1H", "HR2"))
+    p.add_argument("--episodes", type=int, required=True, metavar="N", help="successful demonstrations to keep")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
+    p.add_argument("--steps", type=int, default=40, metavar="T",
+                   help="longest episode, control steps (default: 40, the twin's episode)")
+    p.add_argument("--max-attempts", type=int, metavar="M", help="give up after M attempts (default: 5 N)")
+    p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
+    p.add_argument("--yes", action="store_true", help="robots: keep every episode, do not ask or wait for Enter")
+    p.set_defaults(func=run_record_demos)
+
+
+def run_record_demos(args: argparse.Namespace) -> int:
+    """Record until ``--episodes`` successful demonstrations are kept; exit 2 after --max-attempts."""
+    from lfdt import layout
+    from lfdt.robot import twin
+    from lfdt.robot.recording import EpisodeRecorder
+    from lfdt.seeding import episode_seed
+
+    task, config = _rig_task(args)
+    rig = _make_rig(args, task, config, args.pairing, "scripted", args.seed, max_steps=args.steps)
+    robot = layout.robot_arm(args.pairing)
+    slot = rig.slots.index(robot)
+    max_attempts = args.max_attempts or 5 * args.episodes
+    meta = _metadata(args, config, seed=args.seed, steps=args.steps)
+    rec = EpisodeRecorder(args.out, twin.twin_schema(task, args.pairing, "demos", meta), rig.control_dt)
+    goal_line = config.goal_line_m if config is not None and not args.sim else None
+    attempts = {"n": 0, "first": rec.next_index()}
+
+    def episode() -> bool:
+        if attempts["n"] >= max_attempts:
+            raise _GiveUp(f"{_episodes_in(args.out)} successful demonstrations after {attempts['n']} attempts "
+                          f"(--max-attempts {max_attempts})")
+        s = episode_seed("demos", args.seed, args.pairing, attempts["first"] + attempts["n"])
+        attempts["n"] += 1
+        rec.start()
+        obs = rig.reset(seed=s)
+        _wait_for_operator(rig, f"attempt {attempts['n']}: robot at its start pose, set the scene", args.yes)
+        program = twin.ProgrammedMotion(task, slot, obs, rig.control_dt, goal_line=goal_line)
+        for _ in range(args.steps):
+            rel = program.next_target() - obs[2 * slot:2 * slot + 2]
+            rig.act({robot: rel})
+            nxt = rig.observe()
+            rec.add(obs, rel, nxt)  # the robot's commanded relative target; the hand is only tracked
+            obs = nxt
+            if rig.done:
+                break
+        rig.stop()  # the arm holds while the outcome is decided
+        ok = rig.outcome()
+        if ok is None:
+            ok = True if args.yes else _ask_yes_no(f"attempt {attempts['n']}: did the demonstration succeed?")
+        if ok:
+            rec.finish()
+        else:
+            rec.abort()
+        return ok
+
+    try:
+        code = _record_loop(rig, rec, args.out, args.episodes, "demo", episode)
+    except _GiveUp as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    if code == 0:
+        print(f"kept {args.episodes} successful demonstrations of {attempts['n']} attempts in {args.out}")
+    return code
+
+
+class _GiveUp(RuntimeError):
+    """Too many failed attempts."""
+
+
+def add_deploy_parser(subparsers) -> None:
+    """Register ``deploy``."""
+    p = subparsers.add_parser("deploy", help="run a trained policy on both robots and log the outcomes",
+                              description="Trials of a trained twin policy (twin_pipeline.load_policy) in domain Y: "
+                                          "up to --steps control steps per trial, then the operator says whether "
+                                          "the task succeeded (--sim: the twin's success flag, from the twin "
+                                          "evaluation's start states). Each outcome is appended to --log as a "
+                                          "row 'trial,success' as soon as it is known; trial numbers continue "
+                                          "after those already in the log. The DVC stage twin_evaluate reads "
+                                          "real_dir/TASK/deploy_METHOD.csv with twin.backend: real.")
+    add_rig_arguments(p, task_required=True)
+    p.add_argument("--method", required=True, choices=METHODS)
+    p.add_argument("--models", required=True, type=Path, metavar="DIR", help="trained models, e.g. models/twin/TASK")
+    p.add_argument("--trials", type=int, required=True, metavar="N", help="trials to run")
+    p.add_argument("--log", required=True, type=Path, metavar="CSV",
+                   help="outcome log, e.g. data/real/TASK/deploy_METHOD.csv")
+    p.add_argument("--steps", type=int, default=40, metavar="T",
+                   help="longest trial, control steps (default: 40, the twin's episode)")
+    p.set_defaults(func=run_deploy)
+
+
+def _logged_trials(path: Path) -> int:
+    """Trials already in a deploy log (checks its header)."""
+    if not path.exists() or path.stat().st_size == 0:
+        return 0
+    with open(path, newline="") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header != ["trial", "success"]:
+            raise ValueError(f"{path}: header {header} is not ['trial', 'success']")
+        return sum(1 for row in reader if row)
+
+
+def _log_trial(path: Path, trial: int, success: bool) -> None:
+    new = not path.exists() or path.stat().st_size == 0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", newline="") as fh:
+        w = csv.writer(fh)
+        if new:
+            w.writerow(["trial", "success"])
+        w.writerow([trial, str(bool(success))])  # "True"/"False": what stages/twin_evaluate.py compares with
+        fh.flush()
+        os.fsync(fh.fileno())  # a trial's outcome survives a crash of the next trial
+
+
+def run_deploy(args: argparse.Namespace) -> int:
+    """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C."""
+    from lfdt.evaluation import evaluation_seeds
+    from lfdt.robot.rig import running
+    from lfdt.robot.twin_pipeline import load_policy
+
+    task, config = _rig_task(args)
+    try:
+        done = _logged_trials(args.log)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    policy = load_policy(task, args.method, args.models)
+    rig = _make_rig(args, task, config, "Y", "scripted", 0, max_steps=args.steps)
+    seeds = evaluation_seeds(done + args.trials)  # the twin evaluation's start states, trial by trial
+    successes = 0
+    bar = _progress(args.trials, "trial", f"{task} {args.method}")
+    try:
+        with running(rig), bar:
+            for trial in range(done, done + args.trials):
+                obs = rig.reset(seed=seeds[trial])
+                _wait_for_operator(rig, f"trial {trial}: robots at their start poses, set the scene", False)
+                for _ in range(args.steps):
+                    a = policy(obs)
+                    rig.act({"r1": a[:2], "r2": a[2:]})
+                    obs = rig.observe()
+                    if rig.done:
+                        break
+                rig.stop()
+                ok = rig.outcome()
+                if ok is None:
+                    ok = _ask_yes_no(f"trial {trial}: did the task succeed?")
+                _log_trial(args.log, trial, ok)
+                successes += ok
+                bar.update(1)
+    except KeyboardInterrupt:
+        print(f"interrupted: arms stopped; {_logged_trials(args.log)} trials in {args.log}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(f"{task} {args.method}: {successes}/{args.trials} successful; log {args.log} "
+          f"({_logged_trials(args.log)} trials in all)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m lfdt.robot`` parser; add subcommands with an ``add_<name>_parser(subparsers)`` function."""
     parser = argparse.ArgumentParser(prog="python -m lfdt.robot",
@@ -109,17 +560,31 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_check_parser(subparsers)
     add_move_parser(subparsers)
+    add_calibrate_parser(subparsers)
+    add_write_rig_config_parser(subparsers)
+    add_record_random_parser(subparsers)
+    add_record_demos_parser(subparsers)
+    add_deploy_parser(subparsers)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments)."""
+    from lfdt.robot.rig import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
+
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except SafetyError as e:
         print(f"refused: {e}; nothing was sent", file=sys.stderr)
         return EXIT_FAILED
-    except ArmNotResponding as e:
+    except (ArmNotResponding, TrackingLost, RigConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_FAILED
+    except EOFError:  # input() on a closed stdin: nobody to answer the operator's questions
+        print("error: stdin closed while waiting for the operator (robots: run interactively, or --yes where "
+              "offered)", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -369,10 +369,10 @@ class ScriptedDemo:
     peg, and completes the insertion.
     """
 
-    def __init__(self, env: TwinEnv, rng: np.random.Generator | None = None):
+    def __init__(self, env: TwinEnv):
         if env.domain == "Y":
             raise ValueError("scripted demonstrations are for domain X (R1H or HR2)")
-        self.env, self.rng = env, rng
+        self.env = env
         self.robot_slot = 0 if env.domain == "R1H" else 1
         self.human_slot = 1 - self.robot_slot
         self.program = ProgrammedMotion(env.task, self.robot_slot, env.observe(), env.cfg.control_dt)
@@ -471,7 +471,7 @@ def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, cfg: TwinC
             raise RuntimeError(f"{task} {pairing}: {kept} successful demonstrations in {attempts} attempts")
         s = episode_seed("demos", seed, pairing, attempts)
         obs, _ = env.reset(seed=s)
-        demo = ScriptedDemo(env, np.random.default_rng(s))
+        demo = ScriptedDemo(env)
         rec.start()
         success = False
         for _ in range(env.cfg.max_steps):
