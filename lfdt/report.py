@@ -98,7 +98,7 @@ def plot(runs: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    fig, ax = plt.subplots(figsize=(8.4, 4.2), dpi=120)
     colours = {"bc_no_translation": "tab:gray", "lfdt_no_dyn": "tab:orange", "lfdt_no_id": "tab:red",
                "lfdt": "tab:blue"}
     for method in [m for m in METHOD_ORDER if m in set(table.method)]:
@@ -116,7 +116,7 @@ def plot(runs: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
     ax.set_xticks(sorted(table.demos.unique()))
     ax.set_title("2D dual-arm box push (dashed: paper's Table I; points: seeds)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
