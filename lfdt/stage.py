@@ -71,6 +71,17 @@ def add_config_arguments(ap, methods) -> None:
     ap.add_argument("--params", default="params.yaml")
 
 
+def task_arguments(description: str, tasks) -> tuple[str, Params]:
+    """Parse ``--task`` and ``--params`` of a twin stage; returns the task and the validated params."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--task", required=True, choices=tasks)
+    ap.add_argument("--params", default="params.yaml")
+    args = ap.parse_args()
+    return args.task, params(args.params)
+
+
 def config_name(method: str, demos: int, seed: int) -> str:
     """Name of one (method, demos, seed) configuration in file and run names."""
     return f"{method}-d{demos}-s{seed}"

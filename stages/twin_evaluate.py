@@ -1,6 +1,5 @@
 """DVC stage: trials of LfDT and BC without translation on one real-robot task (twin, or the robots' deploy logs)."""
 
-import argparse
 import csv
 from pathlib import Path
 
@@ -23,25 +22,22 @@ def real_trials(task: str, real_dir: str) -> list[dict]:
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--task", required=True, choices=twin.TASKS)
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = stage.params(args.params).twin
+    task, all_params = stage.task_arguments(__doc__, twin.TASKS)
+    p = all_params.twin
     with tracking.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend}},
-                            tags={"task": args.task, "backend": p.backend},
-                            run_name=f"twin_evaluate-{args.task}") as run:
+                            tags={"task": task, "backend": p.backend},
+                            run_name=f"twin_evaluate-{task}") as run:
         if p.backend == "real":
-            rows = real_trials(args.task, p.real_dir)
+            rows = real_trials(task, p.real_dir)
         else:
-            rows = twin_pipeline.evaluate(args.task, p, Path("models/twin") / args.task,
-                                          video_root=Path("reports/twin/videos") / args.task)
+            rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task,
+                                          video_root=Path("reports/twin/videos") / task)
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin_pipeline.METHODS}
         run.metrics({f"{m}/successes": v for m, v in summary.items()})
-        stage.write_json(Path("reports/twin") / f"{args.task}_eval.json",
-                         {"task": args.task, "backend": p.backend, "trials": p.trials, "successes": summary,
+        stage.write_json(Path("reports/twin") / f"{task}_eval.json",
+                         {"task": task, "backend": p.backend, "trials": p.trials, "successes": summary,
                           "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
-    print(f"{args.task}: " + ", ".join(f"{m} {v}/{p.trials}" for m, v in summary.items()))
+    print(f"{task}: " + ", ".join(f"{m} {v}/{p.trials}" for m, v in summary.items()))
 
 
 if __name__ == "__main__":
