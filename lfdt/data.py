@@ -126,10 +126,9 @@ def read_schema_metadata(schema: pa.Schema) -> dict:
 def read_metadata(path: str | Path) -> dict:
     """The lfdt metadata document of a Parquet file (or of a recording directory's files)."""
     schema = pq.read_schema(_first_file(path))
-    raw = (schema.metadata or {}).get(META_KEY)
-    if raw is None:
+    if META_KEY not in (schema.metadata or {}):
         raise ValueError(f"{path} has no lfdt metadata: not written by lfdt.data")
-    return json.loads(raw)
+    return read_schema_metadata(schema)
 
 
 def read_transitions(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
