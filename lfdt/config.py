@@ -198,8 +198,62 @@ class RandomConfig(Strict):
         return self
 
 
+class RobotProgramConfig(Strict):
+    """One robot's push program, written for that robot alone (as an operator programs each take separately)."""
+
+    speed: PosFloat = 0.08
+    """Nominal end-effector push speed along the push direction (+y), m/s."""
+    delay: NonNegFloat = 0.0
+    """Nominal time before the push starts, s."""
+    end_offset: float = 0.0
+    """Added to the push length (the box's start-to-goal distance, measured before the take), m."""
+
+
+class ProgramVariation(Strict):
+    """Per-demonstration variation of a programmed robot (each take draws it once, before the episode)."""
+
+    speed_scale: Annotated[list[PosFloat], Field(min_length=2, max_length=2)] = [0.8, 1.2]
+    """The take's speed is the program's times U[speed_scale[0], speed_scale[1]]."""
+    delay: NonNegFloat = 0.2
+    """The take starts U[0, delay] s later than the program's own delay."""
+    lateral_offset: NonNegFloat = 0.01
+    """The held lateral end position is the start position plus U[-lateral_offset, lateral_offset], m."""
+    end_offset: NonNegFloat = 0.005
+    """The take's end point moves by U[-end_offset, end_offset] along the push direction, m."""
+    action_noise: NonNegFloat = 0.02
+    """Standard deviation of Gaussian noise added to every torque command (normalised units)."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> ProgramVariation:
+        if self.speed_scale[0] > self.speed_scale[1]:
+            raise ValueError(f"speed_scale {self.speed_scale} must be [low, high]")
+        return self
+
+
+class ProgramConfig(Strict):
+    """The robots' programmed motions in demonstrations of the 'programmed_robot' protocol (paper §IV-E: the
+    robotic arm replays a motion programmed in advance; the human adapts)."""
+
+    r1: RobotProgramConfig = RobotProgramConfig(speed=0.07)
+    """Robot1's program (used in R1H demonstrations)."""
+    r2: RobotProgramConfig = RobotProgramConfig(speed=0.10)
+    """Robot2's program (used in HR2 demonstrations)."""
+    variation: ProgramVariation = ProgramVariation()
+    """What changes from one take to the next."""
+    lateral_gain: PosFloat = 2.0
+    """Gain holding the end effector at the take's lateral position, 1/s."""
+    approach_gain: PosFloat = 4.0
+    """Gain of the final approach to the end point (the push slows down within speed / gain of it), 1/s."""
+
+
 class DemosConfig(Strict):
     """Expert demonstrations in domain X."""
+
+    protocol: Literal["programmed_robot", "joint_expert"] = "programmed_robot"
+    """Who acts in a demonstration: 'programmed_robot' (the paper's: the robot replays a programmed motion, an SAC
+    human stand-in adapts to it) or 'joint_expert' (one SAC policy drives both arms)."""
+    program: ProgramConfig = ProgramConfig()
+    """The robots' programs ('programmed_robot' protocol)."""
 
     per_pairing: PosInt = 200
     """Successful demonstrations kept per pairing."""
@@ -287,6 +341,10 @@ class TranslatorConfig(Strict):
     """How y_hat^O is made: G's output ('translate', as in the paper), G's correction added to x^O ('correct'), or
     x^O itself ('copy': the same object, seen alike in both domains). The robot's columns never have such a
     shortcut: the partial identity loss stays their only tie to x^Ri."""
+    kinematics: Literal["learned", "forward"] = "learned"
+    """How the robots' end positions in y_hat are made: G's output ('learned', as in the paper) or the forward
+    kinematics of G's joint angles ('forward': Y's arm model is known, so a translated arm's end is always where
+    its joints put it)."""
     hand_skip: bool = False
     """G outputs the missing robot's end position as a correction added to the human's hand position (both are
     positions in the same world frame, as in the paper's real-robot state)."""
@@ -298,10 +356,27 @@ class TranslatorConfig(Strict):
     """Units of L_dyn: normalised one-step changes ('delta') or normalised states ('state')."""
     labels: Literal["inverse", "recorded_robot"] = "inverse"
     """BC action labels: F^-1(y_hat_t, y_hat_t+1) for both arms, or keep the recorded action of the real robot."""
+    holdout_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.1
+    """Fraction of each pairing's demonstrations (whole episodes) G never trains on; G keeps its parameters of the
+    lowest translation loss on them (0 = keep the last iterate)."""
+    select_every: PosInt = 500
+    """Iterations between measurements of the held-out translation loss."""
     log_every: PosInt = 200
     """Iterations between diagnostics sent to MLflow."""
     torch_threads: PosInt = 1
     """Torch CPU threads."""
+
+
+class TrackConfig(Strict):
+    """Closed-loop re-execution of the translated demonstrations in Y (the ``lfdt_track`` row, our extension)."""
+
+    controller: Literal["jacobian", "inverse"] = "jacobian"
+    """'jacobian': resolved-rate control of both ends towards their next translated positions; 'inverse':
+    a_t = F^-1(y_t, y_hat_t+1) from the state actually reached."""
+    gain: Annotated[float, Field(gt=0, le=1)] = 1.0
+    """Share of the distance to the next translated end position the Jacobian controller asks for in one step."""
+    settle_steps: Annotated[int, Field(ge=0)] = 10
+    """Control steps after the demonstration's last target, holding it, for the box to come to rest."""
 
 
 class BCConfig(Strict):

@@ -101,12 +101,40 @@ def wilson_interval(successes: int, trials: int, z: float = 1.96) -> tuple[float
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def seed_mean_interval(rates: list[float], z_t: dict[int, float] | None = None) -> tuple[float, float]:
-    """95 % t-interval of the mean of per-seed success rates (degenerate with one seed)."""
-    t_table = z_t or {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
-    n = len(rates)
-    m = float(np.mean(rates))
-    if n < 2:
+def seed_state_interval(outcomes: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Interval of the mean success rate that accounts for both the training seeds and the start states.
+
+    ``outcomes`` is a (seeds, start states) array of 0/1 trial outcomes, every seed run from the same start
+    states (a crossed design). Seeds and start states are both treated as random draws: the variance of the
+    grand mean is estimated from the two-way ANOVA mean squares as (MS_seed + MS_state - MS_residual) / (S T)
+    (= var_seed / S + var_state / T + var_residual / (S T)), with Satterthwaite's degrees of freedom and a t
+    quantile. With one seed only the start-state and residual terms remain (a within-seed interval).
+    """
+    from scipy import stats
+
+    y = np.asarray(outcomes, dtype=float)
+    if y.ndim != 2 or y.size == 0:
+        raise ValueError(f"outcomes must be a non-empty (seeds, start states) array, got shape {y.shape}")
+    n_s, n_t = y.shape
+    m = float(y.mean())
+    if n_t < 2:
         return (m, m)
-    half = t_table.get(n - 1, 1.96) * float(np.std(rates, ddof=1)) / math.sqrt(n)
+    row, col = y.mean(axis=1), y.mean(axis=0)
+    ms_state = n_s * float(((col - m) ** 2).sum()) / (n_t - 1)
+    if n_s < 2:
+        var, df = ms_state / n_t, n_t - 1
+    else:
+        ms_seed = n_t * float(((row - m) ** 2).sum()) / (n_s - 1)
+        resid = y - row[:, None] - col[None, :] + m
+        ms_res = float((resid ** 2).sum()) / ((n_s - 1) * (n_t - 1))
+        terms = [(ms_seed, n_s - 1), (ms_state, n_t - 1), (-ms_res, (n_s - 1) * (n_t - 1))]
+        num = sum(t for t, _ in terms)
+        # a negative estimate (possible by chance) falls back to the larger of the two one-way estimates
+        num = max(num, ms_seed, ms_state)
+        var = num / (n_s * n_t)
+        denom = sum(t * t / d for t, d in terms)
+        df = num * num / denom if denom > 0 else n_s - 1
+    if var <= 0:
+        return (m, m)
+    half = float(stats.t.ppf(0.5 + level / 2, max(df, 1.0))) * math.sqrt(var)
     return (max(0.0, m - half), min(1.0, m + half))

@@ -1,7 +1,12 @@
 """SAC experts in domain X, their resumable training, evaluation and demonstration collection.
 
-One stable-baselines3 SAC policy controls both arms of a pairing (the robot and the human
-stand-in), as a stand-in for the paper's human expert working with a robot.
+Two demonstration protocols (``demos.protocol``):
+
+* ``programmed_robot`` (the paper's, default): the pairing's robot replays a motion programmed in
+  advance (:mod:`lfdt.programmed`) and one stable-baselines3 SAC policy controls only the human
+  stand-in, seeing the whole state: the coordination lives in the human;
+* ``joint_expert``: one SAC policy controls both arms of a pairing, so the robot's recorded actions
+  are themselves coordinated.
 
 Checkpoints (every ``checkpoint_every`` env steps) hold the SB3 parameters and optimiser states
 (``torch.save`` of state dicts, read back with ``weights_only=True``) and the replay buffer as
@@ -33,22 +38,39 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from lfdt import data, layout
-from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig
+from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig, ProgramConfig
 from lfdt.envs import BoxPushEnv
+from lfdt.programmed import ProgrammedPartnerEnv
 from lfdt.seeding import episode_seed, seed_everything
 
 _BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
 
-def config_hash(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig) -> str:
+def protocol_doc(demos_cfg: DemosConfig) -> dict:
+    """What of the demonstration config the expert depends on: the protocol and, for it, the robots' programs."""
+    doc: dict = {"protocol": demos_cfg.protocol}
+    if demos_cfg.protocol == "programmed_robot":
+        doc["program"] = demos_cfg.program.model_dump()
+    return doc
+
+
+def config_hash(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg: DemosConfig) -> str:
     """Hash of everything that determines a training run (a checkpoint resumes only a run with the same hash)."""
-    doc = json.dumps({"pairing": pairing, "env": env_cfg.model_dump(), "experts": cfg.model_dump()}, sort_keys=True)
+    doc = json.dumps({"pairing": pairing, "env": env_cfg.model_dump(), "experts": cfg.model_dump(),
+                      **protocol_doc(demos_cfg)}, sort_keys=True)
     return hashlib.sha256(doc.encode()).hexdigest()[:16]
 
 
-def make_vec_env(pairing: str, env_cfg: EnvConfig, n_envs: int, seed: int) -> DummyVecEnv:
+def make_env(pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig) -> BoxPushEnv | ProgrammedPartnerEnv:
+    """The environment the expert of a pairing acts in: the human beside a programmed robot, or both arms."""
+    if demos_cfg.protocol == "programmed_robot":
+        return ProgrammedPartnerEnv(pairing, env_cfg, demos_cfg.program)
+    return BoxPushEnv(pairing, env_cfg)
+
+
+def make_vec_env(pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig, n_envs: int, seed: int) -> DummyVecEnv:
     """n_envs Monitor-wrapped environments of a pairing, seeded from the expert-training seed block."""
-    venv = DummyVecEnv([lambda: Monitor(BoxPushEnv(pairing, env_cfg), info_keywords=("is_success",))
+    venv = DummyVecEnv([lambda: Monitor(make_env(pairing, env_cfg, demos_cfg), info_keywords=("is_success",))
                         for _ in range(n_envs)])
     venv.seed(episode_seed("expert_train", seed, pairing, 0))
     return venv
@@ -190,14 +212,14 @@ class TrainingCallback(BaseCallback):
         return True
 
 
-def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, checkpoint_dir: Path,
+def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg: DemosConfig, checkpoint_dir: Path,
                  log: Callable[[dict, int], None] | None = None, progress=None) -> tuple[SAC, dict]:
     """Train (or resume training) the SAC expert of a pairing. Returns the model and timing stats."""
     torch.set_num_threads(cfg.torch_threads)
     seed_everything(cfg.seed)
-    venv = make_vec_env(pairing, env_cfg, cfg.n_envs, cfg.seed)
+    venv = make_vec_env(pairing, env_cfg, demos_cfg, cfg.n_envs, cfg.seed)
     model = build_sac(venv, cfg)
-    checkpoints = Checkpoints(checkpoint_dir, config_hash(pairing, env_cfg, cfg))
+    checkpoints = Checkpoints(checkpoint_dir, config_hash(pairing, env_cfg, cfg, demos_cfg))
     resumed_from = 0
     latest = checkpoints.latest()
     if latest is not None:
@@ -228,20 +250,32 @@ def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, checkpoin
 
 # ----------------------------------------------------------------------------- saved experts
 
-def save_expert(model: SAC, out_dir: Path, pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, extra: dict) -> None:
+def save_expert(model: SAC, out_dir: Path, pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig,
+                demos_cfg: DemosConfig, extra: dict) -> None:
     """Write ``policy.pt`` (state dict) and ``config.json`` (resolved config) atomically into out_dir."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = out_dir / ".policy.pt.tmp"
     torch.save(model.policy.state_dict(), tmp)
     os.replace(tmp, out_dir / "policy.pt")
+    human_only = demos_cfg.protocol == "programmed_robot"
     config = {
         "pairing": pairing, "algorithm": "SAC (stable-baselines3)", "env_id": f"lfdt/BoxPush-{pairing}-v0",
-        "observation_columns": layout.state_columns(pairing), "action_columns": layout.action_columns(pairing),
-        "env": env_cfg.model_dump(), "experts": cfg.model_dump(), "config_hash": config_hash(pairing, env_cfg, cfg),
-        **extra,
+        **protocol_doc(demos_cfg),
+        "controls": "the human stand-in only (the robot replays its program)" if human_only else "both arms",
+        "observation_columns": layout.state_columns(pairing),
+        "action_columns": layout.arm_action_columns("h") if human_only else layout.action_columns(pairing),
+        "env": env_cfg.model_dump(), "experts": cfg.model_dump(),
+        "config_hash": config_hash(pairing, env_cfg, cfg, demos_cfg), **extra,
     }
     (out_dir / "config.json").write_text(json.dumps(config, indent=2))
+
+
+def expert_demos_config(config: dict) -> DemosConfig:
+    """The protocol (and programs) a saved expert was trained for, from its ``config.json``."""
+    protocol = config.get("protocol", "joint_expert")
+    program = ProgramConfig.model_validate(config["program"]) if "program" in config else ProgramConfig()
+    return DemosConfig(protocol=protocol, program=program)
 
 
 def load_expert(model_dir: Path) -> tuple[SAC, dict]:
@@ -250,22 +284,23 @@ def load_expert(model_dir: Path) -> tuple[SAC, dict]:
     config = json.loads((model_dir / "config.json").read_text())
     env_cfg = EnvConfig.model_validate(config["env"])
     cfg = ExpertsConfig.model_validate(config["experts"])
-    env = BoxPushEnv(config["pairing"], env_cfg)
+    env = make_env(config["pairing"], env_cfg, expert_demos_config(config))
     model = build_sac(env, cfg, buffer_size=1)
     model.policy.load_state_dict(torch.load(model_dir / "policy.pt", weights_only=True))
     model.policy.set_training_mode(False)
     return model, config
 
 
-def run_episode(model: SAC, env: BoxPushEnv, seed: int, deterministic: bool = True) -> dict:
-    """Roll out one episode; returns states, actions, next states, success and length."""
+def run_episode(model: SAC, env: BoxPushEnv | ProgrammedPartnerEnv, seed: int, deterministic: bool = True) -> dict:
+    """Roll out one episode; returns states, full actions (both arms), next states, success and length."""
     obs, _ = env.reset(seed=seed)
     states, actions, nexts, successes = [], [], [], []
     for _ in range(env.cfg.max_episode_steps):
         act, _ = model.predict(obs, deterministic=deterministic)
         nobs, _, term, trunc, info = env.step(act)
         states.append(obs)
-        actions.append(np.clip(act, -1.0, 1.0))
+        # the programmed robot's command comes from the environment, the expert's from the policy
+        actions.append(info["action"] if "action" in info else np.clip(act, -1.0, 1.0))
         nexts.append(nobs)
         successes.append(info["is_success"])
         obs = nobs
@@ -275,9 +310,10 @@ def run_episode(model: SAC, env: BoxPushEnv, seed: int, deterministic: bool = Tr
             "success": bool(successes[-1]), "length": len(states), "final_info": info}
 
 
-def evaluate_expert(model: SAC, pairing: str, env_cfg: EnvConfig, episodes: int, seed: int) -> dict:
+def evaluate_expert(model: SAC, pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig, episodes: int,
+                    seed: int) -> dict:
     """Success rate over ``episodes`` start states from the expert-evaluation seed block (never seen in training)."""
-    env = BoxPushEnv(pairing, env_cfg)
+    env = make_env(pairing, env_cfg, demos_cfg)
     results = [run_episode(model, env, episode_seed("expert_eval", seed, pairing, i)) for i in range(episodes)]
     succ = [r for r in results if r["success"]]
     return {
@@ -296,7 +332,7 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
 
     Raises RuntimeError if ``cfg.max_attempts`` attempts do not give enough.
     """
-    env = BoxPushEnv(pairing, env_cfg)
+    env = make_env(pairing, env_cfg, cfg)
     robot = layout.robot_arm(pairing)
     slot_of_robot = 0 if robot == "r1" else 1
     n_first = layout.ARM_JOINTS[layout.DOMAIN_ARMS[pairing][0]]
@@ -322,8 +358,10 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
                "next.success": (pa.bool_(), "the task is solved at frame t+1 (true only on the last frame)")},
         metadata={"kind": "demos", "domain": pairing, "seed": cfg.seed, "layout": layout.describe(),
                   "env": env_cfg.model_dump(), "demos": cfg.model_dump(), "robot": robot,
-                  "description": f"successful SAC-expert demonstrations of pairing {pairing}; the robot's action "
-                                 f"is action.*, the human stand-in's is human_action.* (not for training)"})
+                  "protocol": cfg.protocol,
+                  "description": f"successful demonstrations of pairing {pairing} ({cfg.protocol} protocol); the "
+                                 f"robot's action is action.*, the human stand-in's is human_action.* (not for "
+                                 f"training)"})
     ep_idx = np.concatenate([np.full(e["length"], i) for i, e in enumerate(kept)])
     frame = np.concatenate([np.arange(e["length"]) for e in kept])
     acts = np.concatenate([e["actions"] for e in kept])

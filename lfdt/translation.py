@@ -60,6 +60,54 @@ def canonical_x_columns(pairing: str, tl: TaskLayout = BOX_PUSH) -> list[str]:
     return tl.canonical_x_columns(pairing)
 
 
+@dataclass(frozen=True)
+class ArmKinematics:
+    """One planar serial arm of Y (angle 0 along +y): where its columns sit in a Y state, its links and base."""
+
+    q: list[int]
+    """Y-state indices of its joint angles."""
+    dq: list[int]
+    """Y-state indices of its joint velocities."""
+    ee: list[int]
+    """Y-state indices of its end position (x, y)."""
+    links: list[float]
+    """Link lengths, m."""
+    base: list[float]
+    """Base position, m."""
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """What the translator may take from Y's known robot model (``translator.kinematics: forward``): an arm's
+    end position is the forward kinematics of its joint angles, and its joint velocity the change of its joint
+    angles over the last control step (the arms are overdamped: this holds within ~5 % on Y's own data)."""
+
+    arms: list[ArmKinematics]
+    dt: float
+    """Control step, s."""
+
+    @classmethod
+    def of_box_push(cls, env_cfg: EnvConfig) -> Kinematics:
+        """The two 3-link robots of the box push's domain Y."""
+        from lfdt.envs import arm_specs
+
+        cols = layout.state_columns("Y")
+        out = []
+        for arm in arm_specs("Y", env_cfg):
+            n = arm.name
+            out.append(ArmKinematics([cols.index(f"{n}.q{i}") for i in range(arm.n)],
+                                     [cols.index(f"{n}.dq{i}") for i in range(arm.n)],
+                                     [cols.index(f"{n}.ee_x"), cols.index(f"{n}.ee_y")],
+                                     list(arm.cfg.links), list(arm.base)))
+        return cls(out, env_cfg.timestep * env_cfg.frame_skip)
+
+
+def forward_kinematics(q: torch.Tensor, links: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+    """End positions (..., 2) of a planar arm for joint angles q (..., n), differentiable."""
+    phi = torch.cumsum(q, dim=-1)
+    return torch.stack([base[0] - (links * torch.sin(phi)).sum(-1), base[1] + (links * torch.cos(phi)).sum(-1)], -1)
+
+
 @dataclass
 class Transitions:
     """Consecutive state pairs of one pairing in canonical X order (raw units)."""
@@ -68,27 +116,64 @@ class Transitions:
     x2: np.ndarray
     episode: np.ndarray
     frame: np.ndarray
+    a: np.ndarray | None = None
+    """The real robot's recorded action (demonstrations; diagnostics only, never trained on)."""
+    x_prev: np.ndarray | None = None
+    """The state one step before x (x itself at an episode's first frame); None means x."""
+
+    def subset(self, m: np.ndarray) -> Transitions:
+        """The transitions selected by a boolean mask or index array."""
+        return Transitions(self.x[m], self.x2[m], self.episode[m], self.frame[m],
+                           None if self.a is None else self.a[m], None if self.x_prev is None else self.x_prev[m])
 
 
 def load_x_transitions(path, pairing: str, episodes: list[int] | None = None,
-                       tl: TaskLayout = BOX_PUSH) -> Transitions:
-    """State pairs of an X dataset (random or demos), canonical column order, optionally some episodes only."""
+                       tl: TaskLayout = BOX_PUSH, with_actions: bool = False) -> Transitions:
+    """State pairs of an X dataset (random or demos), canonical column order, optionally some episodes only;
+    ``with_actions`` also reads the real robot's recorded action (for diagnostics)."""
     cols = tl.canonical_x_columns(pairing)
+    a_cols = [layout.ACTION_PREFIX + c for c in tl.arm_action_columns(layout.robot_arm(pairing))]
     names = ["episode_index", "frame_index"] + [layout.STATE_PREFIX + c for c in cols] + \
-        [layout.NEXT_STATE_PREFIX + c for c in cols]
+        [layout.NEXT_STATE_PREFIX + c for c in cols] + (a_cols if with_actions else [])
     df = data.read_transitions(path, columns=names)
     if episodes is not None:
         df = df[df.episode_index.isin(episodes)]
+    df = df.sort_values(["episode_index", "frame_index"], kind="stable")
+    x = np.array(df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32))
+    episode = df.episode_index.to_numpy()
+    first = np.r_[True, episode[1:] != episode[:-1]]
+    x_prev = np.where(first[:, None], x, np.roll(x, 1, axis=0))
     return Transitions(
-        x=np.array(df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32)),
-        x2=np.array(df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32)),
-        episode=df.episode_index.to_numpy(), frame=df.frame_index.to_numpy())
+        x=x, x2=np.array(df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32)),
+        episode=episode, frame=df.frame_index.to_numpy(),
+        a=df[a_cols].to_numpy(np.float32) if with_actions else None, x_prev=x_prev)
+
+
+def split_held_out(sets: dict[str, Transitions], fraction: float, seed: int
+                   ) -> tuple[dict[str, Transitions], dict[str, Transitions] | None]:
+    """Split each pairing's demonstrations by whole episodes: (training, held out for checkpoint selection).
+
+    ``fraction`` 0 holds nothing out (returns None); otherwise at least one episode per pairing is held out.
+    """
+    if fraction <= 0:
+        return sets, None
+    train, held = {}, {}
+    rng = np.random.default_rng([seed, 7])
+    for p, t in sets.items():
+        eps = np.unique(t.episode)
+        if len(eps) < 2:
+            raise ValueError(f"{p}: {len(eps)} demonstration(s) cannot be split for translator.holdout_fraction")
+        n = max(1, int(round(fraction * len(eps))))
+        out = np.isin(t.episode, rng.choice(eps, size=n, replace=False))
+        train[p], held[p] = t.subset(~out), t.subset(out)
+    return train, held
 
 
 class Translator(nn.Module):
     """G, D and the X normalisers of both pairings, saved as one state dict."""
 
-    def __init__(self, hidden: list[int], tl: TaskLayout = BOX_PUSH, slope: float = 0.2):
+    def __init__(self, hidden: list[int], tl: TaskLayout = BOX_PUSH, slope: float = 0.2,
+                 kinematics: Kinematics | None = None):
         super().__init__()
         x_dim = len(tl.canonical_x_columns("R1H"))
         y_dim = len(tl.state_columns("Y"))
@@ -102,9 +187,34 @@ class Translator(nn.Module):
         self.register_buffer("skip_offset", torch.zeros(n_p, y_dim))
         # 1 where G's own output counts, 0 where the state is copied from x (object: "copy")
         self.register_buffer("g_mask", torch.ones(y_dim))
+        # Y's robot model (kinematics: "forward"): end columns from the joint angles, velocities from their change
+        arms = kinematics.arms if kinematics else []
+        n_j = len(arms[0].q) if arms else 0
+        self.register_buffer("fk_q", torch.as_tensor([a.q for a in arms], dtype=torch.long).view(len(arms), n_j))
+        self.register_buffer("fk_dq", torch.as_tensor([a.dq for a in arms], dtype=torch.long).view(len(arms), n_j))
+        self.register_buffer("fk_ee", torch.as_tensor([a.ee for a in arms], dtype=torch.long).view(len(arms), 2))
+        self.register_buffer("fk_links", torch.as_tensor([a.links for a in arms], dtype=torch.float32)
+                             .view(len(arms), n_j))
+        self.register_buffer("fk_base", torch.as_tensor([a.base for a in arms], dtype=torch.float32).view(len(arms), 2))
+        self.register_buffer("fk_dt", torch.tensor(kinematics.dt if kinematics else 1.0))
+        self.register_buffer("y_mean", torch.zeros(y_dim))
+        self.register_buffer("y_std", torch.ones(y_dim))
 
-    def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor) -> torch.Tensor:
-        """y_hat (normalised Y state) from normalised canonical x and the pairing index."""
+    def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor,
+                 x_prev_n: torch.Tensor | None = None) -> torch.Tensor:
+        """y_hat (normalised Y state) from normalised canonical x and the pairing index.
+
+        With Y's robot model (``kinematics: forward``) the end columns are the forward kinematics of the joint
+        angles, and, given the previous state ``x_prev_n`` (equal to ``x_n`` at an episode's first frame, where
+        the arms are at rest), the joint velocities are the change of the joint angles over the control step.
+        """
+        y = self._raw_generate(x_n, pairing_idx)
+        if len(self.fk_q):
+            y_prev = None if x_prev_n is None else self._raw_generate(x_prev_n, pairing_idx)
+            y = self.apply_kinematics(y, y_prev)
+        return y
+
+    def _raw_generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor) -> torch.Tensor:
         onehot = nnf.one_hot(pairing_idx, len(layout.PAIRINGS)).to(x_n.dtype)
         y = self.G(torch.cat([x_n, onehot], dim=-1)) * self.g_mask
         src = self.skip_src[pairing_idx]
@@ -115,12 +225,28 @@ class Translator(nn.Module):
                                 torch.zeros_like(y))
         return y
 
+    def apply_kinematics(self, y_n: torch.Tensor, y_prev_n: torch.Tensor | None = None) -> torch.Tensor:
+        """Each arm's end columns from its joint angles; its joint velocities from the change since ``y_prev_n``
+        (when given). Normalised units in and out."""
+        y_n = y_n.clone()
+        for k in range(len(self.fk_q)):
+            qi, dqi, ei = self.fk_q[k], self.fk_dq[k], self.fk_ee[k]
+            q = y_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
+            ee = forward_kinematics(q, self.fk_links[k], self.fk_base[k])
+            y_n[:, ei] = (ee - self.y_mean[ei]) / self.y_std[ei]
+            if y_prev_n is not None:
+                q_prev = y_prev_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
+                y_n[:, dqi] = ((q - q_prev) / self.fk_dt - self.y_mean[dqi]) / self.y_std[dqi]
+        return y_n
+
     def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
-        """Normalised y_hat for raw canonical x of one pairing (no gradient)."""
+        """Normalised y_hat for the raw canonical states of one episode of a pairing, in time order (no gradient).
+
+        The first state is the episode's start (the arms at rest)."""
         with torch.no_grad():
-            xt = torch.as_tensor(x, dtype=torch.float32)
+            xt = self.x_norms[pairing](torch.as_tensor(x, dtype=torch.float32))
             idx = torch.full((len(xt),), PAIRING_INDEX[pairing], dtype=torch.long)
-            return self.generate(self.x_norms[pairing](xt), idx)
+            return self.generate(xt, idx, torch.cat([xt[:1], xt[:-1]]))
 
 
 def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout = BOX_PUSH) -> list[tuple[str, str]]:
@@ -190,36 +316,105 @@ class _Sampler:
 
     def __init__(self, sets: dict[str, Transitions], translator: Translator, gen: torch.Generator):
         self.gen = gen
-        self.x, self.x2, self.n = {}, {}, {}
+        self.x, self.x2, self.x0, self.n = {}, {}, {}, {}
         for p, tr in sets.items():
             norm = translator.x_norms[p]
             with torch.no_grad():
                 self.x[p] = norm(torch.as_tensor(tr.x))
                 self.x2[p] = norm(torch.as_tensor(tr.x2))
+                self.x0[p] = self.x[p] if tr.x_prev is None else norm(torch.as_tensor(tr.x_prev))
             self.n[p] = len(tr.x)
 
-    def sample(self, per_pairing: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        xs, x2s, ps = [], [], []
+    def sample(self, per_pairing: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(x_prev, x, x2, pairing index) of ``per_pairing`` random transitions of each pairing."""
+        x0s, xs, x2s, ps = [], [], [], []
         for p in layout.PAIRINGS:
             idx = torch.randint(0, self.n[p], (per_pairing,), generator=self.gen)
+            x0s.append(self.x0[p][idx])
             xs.append(self.x[p][idx])
             x2s.append(self.x2[p][idx])
             ps.append(torch.full((per_pairing,), PAIRING_INDEX[p], dtype=torch.long))
-        return torch.cat(xs), torch.cat(x2s), torch.cat(ps)
+        return torch.cat(x0s), torch.cat(xs), torch.cat(x2s), torch.cat(ps)
+
+
+class _Losses:
+    """The generator's losses of eq. 6 on one batch, reusable for training, selection and diagnostics."""
+
+    def __init__(self, tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig, tl: TaskLayout):
+        self.tr, self.dyn, self.cfg = tr, dyn, cfg
+        y_dim = len(tl.state_columns("Y"))
+        self.robot_mask = torch.zeros(len(layout.PAIRINGS), y_dim, dtype=torch.bool)
+        for p, i in PAIRING_INDEX.items():
+            self.robot_mask[i, tl.robot_y_slice(p)] = True
+        self.n_robot = len(tl.arm_cols["r1"])
+        self.dyn_scale = dyn.delta_scale if cfg.dyn_scale == "delta" else torch.ones_like(dyn.delta_scale)
+        obj = [tl.state_columns("Y").index(c) for c in tl.object_cols]
+        self.object_mask = torch.zeros(y_dim, dtype=torch.bool)
+        self.object_mask[obj] = True
+
+    def __call__(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pidx: torch.Tensor
+                 ) -> dict[str, torch.Tensor]:
+        """y_hat, y_hat2, the per-column squared dynamics error and the identity loss of a batch
+        (``x0``: the states one step before ``x``, used only with Y's robot model)."""
+        kin = bool(len(self.tr.fk_q))
+        y_hat = self.tr.generate(x, pidx, x0 if kin else None)
+        y_hat2 = self.tr.generate(x2, pidx, x if kin else None)
+        a_tilde = self.dyn.inverse_model(y_hat, y_hat2)
+        y_tilde = self.dyn.forward_model(y_hat, a_tilde)
+        dyn_sq = ((y_tilde - y_hat2) / self.dyn_scale) ** 2
+        y_robot = y_hat[self.robot_mask[pidx]].view(-1, self.n_robot)
+        l_id = ((y_robot - x[:, :self.n_robot]) ** 2).mean()
+        return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq, "dyn": dyn_sq.mean(),
+                "id": l_id}
+
+    def dyn_split(self, dyn_sq: torch.Tensor, pidx: torch.Tensor) -> dict[str, float]:
+        """L_dyn split by the real robot's columns, the missing robot's and the object's."""
+        real = self.robot_mask[pidx]
+        missing = ~real & ~self.object_mask
+        return {"real_robot": float(dyn_sq[real].mean()), "missing_robot": float(dyn_sq[missing].mean()),
+                "object": float(dyn_sq[:, self.object_mask].mean())}
+
+    def selection(self, out: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The held-out translation loss a checkpoint is kept by: eq. 6 without the adversarial term (D changes
+        while training, so its loss is no yardstick across iterations)."""
+        return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"]
+
+
+def _normalised(tr: Translator, sets: dict[str, Transitions]
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """All transitions of some pairings, normalised: (x_prev, x, x2, pairing index)."""
+    x0s, xs, x2s, ps = [], [], [], []
+    with torch.no_grad():
+        for p, t in sets.items():
+            x0s.append(tr.x_norms[p](torch.as_tensor(t.x if t.x_prev is None else t.x_prev)))
+            xs.append(tr.x_norms[p](torch.as_tensor(t.x)))
+            x2s.append(tr.x_norms[p](torch.as_tensor(t.x2)))
+            ps.append(torch.full((len(t.x),), PAIRING_INDEX[p], dtype=torch.long))
+    return torch.cat(x0s), torch.cat(xs), torch.cat(x2s), torch.cat(ps)
 
 
 def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
                      dyn: DynamicsModels, cfg: TranslatorConfig, seed: int, std_floor: float = 1e-2,
                      log: Callable[[dict, int], None] | None = None, progress=None,
-                     tl: TaskLayout = BOX_PUSH) -> tuple[Translator, dict]:
-    """Train G and D with eq. 6 (frozen F, F^-1). Returns the translator and training statistics."""
+                     tl: TaskLayout = BOX_PUSH, kinematics: Kinematics | None = None,
+                     held_out: dict[str, Transitions] | None = None) -> tuple[Translator, dict]:
+    """Train G and D with eq. 6 (frozen F, F^-1). Returns the translator and training statistics.
+
+    ``held_out``: demonstrations G never trains on; every ``cfg.select_every`` iterations the translation loss on
+    them is measured and G keeps the parameters of its lowest value (without them, the last iterate is kept).
+    ``kinematics`` is required with ``cfg.kinematics == 'forward'`` (the arms whose end columns G does not output).
+    """
     torch.manual_seed(seed)
     torch.set_num_threads(cfg.torch_threads)
     gen = torch.Generator().manual_seed(seed)
     dyn = dyn.eval()
     for prm in dyn.parameters():
         prm.requires_grad_(False)
-    tr = Translator(list(cfg.hidden), tl)
+    if cfg.kinematics == "forward" and kinematics is None:
+        raise ValueError("translator.kinematics = 'forward' needs the arms' kinematics; this task has none")
+    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None)
+    tr.y_mean.copy_(dyn.y_norm.mean)
+    tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl)
     demo_s, rand_s = _Sampler(demos, tr, gen), _Sampler(random_x, tr, gen)
     with torch.no_grad():
@@ -227,64 +422,131 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     opt_g = torch.optim.Adam(tr.G.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     opt_d = torch.optim.Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
+    losses = _Losses(tr, dyn, cfg, tl)
     quarter = max(1, cfg.batch_size // 4)
-    robot_mask = torch.zeros(len(layout.PAIRINGS), len(tl.state_columns("Y")), dtype=torch.bool)
-    for p, i in PAIRING_INDEX.items():
-        robot_mask[i, tl.robot_y_slice(p)] = True
-    n_robot = len(tl.arm_cols["r1"])
-    history: list[torch.Tensor] = []
-    dyn_scale = dyn.delta_scale if cfg.dyn_scale == "delta" else torch.ones_like(dyn.delta_scale)
+    hold = _normalised(tr, held_out) if held_out else None
+    pool = torch.empty(0, len(tl.state_columns("Y")))
+    best = (float("inf"), None, 0)
     sums: dict[str, float] = {}
     curve = []
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
-        xd, xd2, pd_ = demo_s.sample(quarter)
-        xr, xr2, pr = rand_s.sample(quarter)
-        x, x2, pidx = torch.cat([xd, xr]), torch.cat([xd2, xr2]), torch.cat([pd_, pr])
-        y_hat = tr.generate(x, pidx)
-        y_hat2 = tr.generate(x2, pidx)
-        # --- D step (fakes detached; optionally mixed with a pool of past fakes)
+        xd0, xd, xd2, pd_ = demo_s.sample(quarter)
+        xr0, xr, xr2, pr = rand_s.sample(quarter)
+        x0, x, x2, pidx = torch.cat([xd0, xr0]), torch.cat([xd, xr]), torch.cat([xd2, xr2]), torch.cat([pd_, pr])
+        out = losses(x0, x, x2, pidx)
+        y_hat = out["y_hat"]
+        # --- D step (fakes detached; with a pool, half of them come from past generators, as in Cycle-Dynamics)
         fake = y_hat.detach()
         if cfg.history_size:
-            history.append(fake)
-            pool = torch.cat(history)[-cfg.history_size:]
-            history = [pool]
-            fake = pool[torch.randint(0, len(pool), (len(y_hat),), generator=gen)]
+            if len(pool):
+                n_old = len(fake) // 2
+                old = pool[torch.randint(0, len(pool), (n_old,), generator=gen)]
+                fake_d = torch.cat([fake[: len(fake) - n_old], old])
+            else:
+                fake_d = fake
+            pool = torch.cat([pool, fake])[-cfg.history_size:]
+        else:
+            fake_d = fake
         y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_hat),), generator=gen)]
-        d_real, d_fake = tr.D(y_real), tr.D(fake)
+        d_real, d_fake = tr.D(y_real), tr.D(fake_d)
         l_d = d_loss_fn(d_real, d_fake)
         opt_d.zero_grad(set_to_none=True)
         l_d.backward()
         opt_d.step()
         # --- G step
         l_adv = g_loss_fn(tr.D(y_hat))
-        a_tilde = dyn.inverse_model(y_hat, y_hat2)
-        y_tilde = dyn.forward_model(y_hat, a_tilde)
-        l_dyn = (((y_tilde - y_hat2) / dyn_scale) ** 2).mean()
-        x_robot = x[:, :n_robot]
-        y_robot = y_hat[robot_mask[pidx]].view(-1, n_robot)
-        l_id = ((y_robot - x_robot) ** 2).mean()
-        loss = cfg.lambda_adv * l_adv + cfg.lambda_dyn * l_dyn + cfg.lambda_id * l_id
+        loss = cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         opt_g.step()
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
-        for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", l_dyn), ("loss/id", l_id),
+        for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", out["dyn"]), ("loss/id", out["id"]),
                      ("loss/G_total", loss), ("D/accuracy", acc)):
             sums[k] = sums.get(k, 0.0) + v.item()
         if progress is not None:
             progress.update(1)
+        point = None
         if it % cfg.log_every == 0 or it == cfg.iterations:
             n = cfg.log_every if it % cfg.log_every == 0 else it % cfg.log_every
             point = {k: v / n for k, v in sums.items()}
             sums = {}
+        if hold is not None and (it % cfg.select_every == 0 or it == cfg.iterations):
+            with torch.no_grad():
+                h = losses(*hold)
+                sel = float(losses.selection(h))
+            point = point or {}
+            point.update({"heldout/selection_loss": sel, "heldout/dyn": float(h["dyn"]), "heldout/id": float(h["id"])})
+            if sel < best[0]:
+                best = (sel, {k: v.clone() for k, v in tr.G.state_dict().items()}, it)
+        if point is not None:
             curve.append({"iteration": it, **point})
             if log:
                 log(point, it)
     wall = time.perf_counter() - t0
+    if best[1] is not None:
+        tr.G.load_state_dict(best[1])
+    final = {k: v for k, v in (curve[-1] if curve else {}).items() if k != "iteration"}
     return tr.eval(), {"wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve,
-                       "final": curve[-1] if curve else {}}
+                       "final": final, "selected_iteration": best[2] if best[1] is not None else cfg.iterations,
+                       "selected_heldout_loss": best[0] if best[1] is not None else None}
+
+
+def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig,
+                           demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
+                           tl: TaskLayout = BOX_PUSH, kinematics: Kinematics | None = None,
+                           max_random: int = 20_000, seed: int = 0) -> dict:
+    """What the trained translator does, measured on demonstrations (not trained on) and random motion.
+
+    * ``dyn/*``: L_dyn split by the real robot's columns, the missing robot's and the object's;
+    * ``D/*``: the discriminator's accuracy on translated demonstrations, on translated X random motion and on
+      real Y random motion (0.5 on translated data = D cannot tell them from Y);
+    * ``labels/real_robot_rmse``: F^-1's labels for the real robot against its recorded actions (normalised
+      torque units; needs the recorded actions in ``demos``);
+    * ``fk/missing_robot_ee_error_m`` (and ``real_robot``): an arm's translated end position against the forward
+      kinematics of its translated joint angles (needs ``kinematics``).
+    """
+    gen = torch.Generator().manual_seed(seed)
+    losses = _Losses(tr, dyn, cfg, tl)
+    out: dict[str, float] = {}
+    with torch.no_grad():
+        x0, x, x2, pidx = _normalised(tr, demos)
+        h = losses(x0, x, x2, pidx)
+        out.update({f"dyn/{k}": v for k, v in losses.dyn_split(h["dyn_sq"], pidx).items()})
+        out["dyn/all"] = float(h["dyn"])
+        out["id/real_robot"] = float(h["id"])
+        sub = {p: t.subset(torch.randperm(len(t.x), generator=gen)[:max_random // 2].numpy())
+               for p, t in random_x.items()}
+        xr0, xr, _, pr = _normalised(tr, sub)
+        yr = tr.generate(xr, pr, xr0 if len(tr.fk_q) else None)
+        y_real = dyn.y_norm(torch.as_tensor(y_random[torch.randperm(len(y_random), generator=gen)[:max_random]
+                                                       .numpy()]))
+        out["D/accuracy_translated_demos"] = float((tr.D(h["y_hat"]) < 0).float().mean())
+        out["D/accuracy_translated_random"] = float((tr.D(yr) < 0).float().mean())
+        out["D/accuracy_real_y"] = float((tr.D(y_real) > 0).float().mean())
+        if all(t.a is not None for t in demos.values()):
+            n_a = len(tl.arm_action_columns("r1"))
+            errs = []
+            for p, t in demos.items():
+                m = pidx == PAIRING_INDEX[p]
+                a_hat = torch.clamp(h["a_tilde"][m], -1.0, 1.0)
+                sl = slice(0, n_a) if layout.robot_arm(p) == "r1" else slice(n_a, 2 * n_a)
+                errs.append(((a_hat[:, sl] - torch.as_tensor(t.a)) ** 2).mean(dim=1))
+            out["labels/real_robot_rmse"] = float(torch.cat(errs).mean().sqrt())
+        if kinematics is not None:
+            y_raw = dyn.y_norm.inverse(h["y_hat"])
+            for p in layout.PAIRINGS:
+                m = pidx == PAIRING_INDEX[p]
+                real = layout.robot_arm(p)
+                for k, arm in enumerate(kinematics.arms):
+                    fk = forward_kinematics(y_raw[m][:, arm.q], torch.as_tensor(arm.links), torch.as_tensor(arm.base))
+                    err = torch.linalg.norm(fk - y_raw[m][:, arm.ee], dim=-1)
+                    key = "real_robot" if (k == 0) == (real == "r1") else "missing_robot"
+                    out.setdefault(f"fk/{key}_ee_error_m", []).append(err)
+            for key in ("real_robot", "missing_robot"):
+                out[f"fk/{key}_ee_error_m"] = float(torch.cat(out[f"fk/{key}_ee_error_m"]).mean())
+    return out
 
 
 def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, str], episodes: dict[str, list[int]],

@@ -17,9 +17,12 @@ def run() -> None:
     if expert_cfg["env"] != p.env.model_dump():
         raise SystemExit(f"error: models/experts/{args.pairing} was trained with other env params than "
                          f"params.yaml's env section; rerun train_experts (dvc repro does)")
+    if experts.protocol_doc(experts.expert_demos_config(expert_cfg)) != experts.protocol_doc(cfg):
+        raise SystemExit(f"error: models/experts/{args.pairing} was trained for another demonstration protocol or "
+                         f"robot program than params.yaml's demos.protocol / demos.program; rerun train_experts")
     out = Path("data/demos") / f"{args.pairing}.parquet"
     with tracking.stage_run("collect_demos", {"env": p.env.model_dump(), "demos": cfg.model_dump()},
-                            tags={"pairing": args.pairing, "seed": cfg.seed},
+                            tags={"pairing": args.pairing, "seed": cfg.seed, "protocol": cfg.protocol},
                             run_name=f"collect_demos-{args.pairing}") as run:
         with stage.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))

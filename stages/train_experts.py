@@ -15,18 +15,20 @@ def run() -> None:
     cfg, env_cfg = p.experts, p.env
     out = Path("models/experts") / args.pairing
     reports = Path("reports/experts")
-    with tracking.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump()},
-                            tags={"pairing": args.pairing, "seed": cfg.seed},
+    demos_cfg = p.demos
+    with tracking.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
+                                              **experts.protocol_doc(demos_cfg)},
+                            tags={"pairing": args.pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
                             run_name=f"train_experts-{args.pairing}") as run:
         with stage.progress(cfg.total_timesteps, f"SAC {args.pairing}", "step") as bar:
             model, stats = experts.train_expert(
-                args.pairing, env_cfg, cfg, Path("checkpoints/experts") / args.pairing,
+                args.pairing, env_cfg, cfg, demos_cfg, Path("checkpoints/experts") / args.pairing,
                 log=lambda m, step: run.metrics(m, step), progress=bar)
-        ev = experts.evaluate_expert(model, args.pairing, env_cfg, cfg.eval_episodes, cfg.seed)
+        ev = experts.evaluate_expert(model, args.pairing, env_cfg, demos_cfg, cfg.eval_episodes, cfg.seed)
         curve = stats.pop("curve")
-        summary = {"pairing": args.pairing, **ev, **stats, "stage_wall_s": stage.wall_since_start(),
+        summary = {"pairing": args.pairing, "protocol": demos_cfg.protocol, **ev, **stats, "stage_wall_s": stage.wall_since_start(),
                    "mlflow_run_id": run.run_id}
-        experts.save_expert(model, out, args.pairing, env_cfg, cfg, {"evaluation": ev, "training": stats})
+        experts.save_expert(model, out, args.pairing, env_cfg, cfg, demos_cfg, {"evaluation": ev, "training": stats})
         stage.write_json(reports / f"{args.pairing}_train.json", summary)
         stage.write_csv(reports / f"{args.pairing}_curve.csv",
                         [{"timesteps": c["timesteps"], "success_rate": c["train/success_rate_last100"],

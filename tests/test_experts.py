@@ -20,43 +20,60 @@ TINY = ExpertsConfig(total_timesteps=1_200, n_envs=2, net_arch=[32, 32], batch_s
                      learning_starts=200, checkpoint_every=400, log_every=200, eval_episodes=3)
 
 
-def test_train_save_load_and_demos(tmp_path):
+@pytest.mark.parametrize("protocol", ["programmed_robot", "joint_expert"])
+def test_train_save_load_and_demos(tmp_path, protocol):
     env_cfg = EnvConfig()
+    demos_cfg = DemosConfig(protocol=protocol, per_pairing=2, success_only=False)
     logged = []
-    model, stats = experts.train_expert("R1H", env_cfg, TINY, tmp_path / "ckpt", log=lambda m, s: logged.append(s))
+    model, stats = experts.train_expert("R1H", env_cfg, TINY, demos_cfg, tmp_path / "ckpt",
+                                        log=lambda m, s: logged.append(s))
     assert stats["timesteps"] == TINY.total_timesteps and stats["resumed_from_timesteps"] == 0
     assert logged == list(range(200, 1_201, 200))
     assert (tmp_path / "ckpt" / "latest.json").exists()
-    experts.save_expert(model, tmp_path / "expert", "R1H", env_cfg, TINY, {"note": "tiny"})
+    # the paper's protocol: the expert controls the human only; the other: both arms
+    assert model.action_space.shape == ((4,) if protocol == "programmed_robot" else (7,))
+    experts.save_expert(model, tmp_path / "expert", "R1H", env_cfg, TINY, demos_cfg, {"note": "tiny"})
     loaded, cfg = experts.load_expert(tmp_path / "expert")
     assert cfg["observation_columns"] == layout.state_columns("R1H") and cfg["note"] == "tiny"
+    assert cfg["protocol"] == protocol
     obs = np.zeros(21)
     np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
-    ev = experts.evaluate_expert(loaded, "R1H", env_cfg, 3, 0)
+    ev = experts.evaluate_expert(loaded, "R1H", env_cfg, demos_cfg, 3, 0)
     assert ev["episodes"] == 3 and 0.0 <= ev["success_rate"] <= 1.0
-    table, st = experts.collect_demos(loaded, "R1H", env_cfg, DemosConfig(per_pairing=2, success_only=False))
+    table, st = experts.collect_demos(loaded, "R1H", env_cfg, demos_cfg)
     path = data.write_table(table, tmp_path / "R1H.parquet")
     meta = data.check_transitions(path, "demos", "R1H")
-    assert meta["robot"] == "r1" and st["demonstrations"] == 2 and st["attempts"] == 2
+    assert meta["robot"] == "r1" and meta["protocol"] == protocol
+    assert st["demonstrations"] == 2 and st["attempts"] == 2
     df = data.read_transitions(path)
     assert [c for c in df.columns if c.startswith("action.")] == ["action.r1.tau0", "action.r1.tau1", "action.r1.tau2"]
     assert [c for c in df.columns if c.startswith("human_action.")] == [f"human_action.h.tau{i}" for i in range(4)]
+    if protocol == "programmed_robot":
+        # the recorded robot action is the program's command, never the policy's
+        assert not np.allclose(df[[f"action.r1.tau{i}" for i in range(3)]].to_numpy(), 0.0)
 
 
 def test_demos_fail_loudly_when_expert_cannot_succeed(tmp_path):
     model, _ = experts.train_expert("HR2", EnvConfig(), TINY.model_copy(update={"total_timesteps": 200}),
-                                    tmp_path / "ckpt")
+                                    DemosConfig(), tmp_path / "ckpt")
     with pytest.raises(RuntimeError, match="demos.max_attempts = 3"):
         experts.collect_demos(model, "HR2", EnvConfig(), DemosConfig(per_pairing=5, max_attempts=3))
 
 
 def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
     env_cfg = EnvConfig()
-    model, _ = experts.train_expert("R1H", env_cfg, TINY.model_copy(update={"total_timesteps": 400}), tmp_path)
-    other = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, TINY.model_copy(update={"gamma": 0.9})))
+    demos_cfg = DemosConfig()
+    model, _ = experts.train_expert("R1H", env_cfg, TINY.model_copy(update={"total_timesteps": 400}), demos_cfg,
+                                    tmp_path)
+    other = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, TINY.model_copy(update={"gamma": 0.9}),
+                                                              demos_cfg))
     assert other.latest() is None
-    same = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, TINY.model_copy(
-        update={"total_timesteps": 400})))
+    # another robot program is another run, too
+    other_program = DemosConfig(program=demos_cfg.program.model_copy(
+        update={"r1": demos_cfg.program.r1.model_copy(update={"speed": 0.05})}))
+    tiny400 = TINY.model_copy(update={"total_timesteps": 400})
+    assert experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, tiny400, other_program)).latest() is None
+    same = experts.Checkpoints(tmp_path, experts.config_hash("R1H", env_cfg, tiny400, demos_cfg))
     assert same.latest() is not None
 
 
