@@ -23,7 +23,7 @@ import pandas as pd
 import torch
 from torch import nn
 
-from lfdt import layout
+from lfdt import layout, methods
 from lfdt.config import BCConfig
 from lfdt.layout import BOX_PUSH, TaskLayout
 from lfdt.nets import Normalizer, load_state, mlp, read_config, save_state
@@ -44,9 +44,14 @@ class BCMember(nn.Module):
         """The action (raw units) for raw states."""
         return self.act_norm.inverse(self.net(self.norm(s)))
 
-    def loss(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-        """Mean squared error in normalised action units (every action dimension weighs alike)."""
-        return ((self.net(self.norm(s)) - self.act_norm(a)) ** 2).mean()
+    def loss(self, s: torch.Tensor, a: torch.Tensor, input_noise: float = 0.0,
+             generator: torch.Generator | None = None) -> torch.Tensor:
+        """Mean squared error in normalised action units (every action dimension weighs alike); ``input_noise``
+        perturbs the normalised inputs (training only)."""
+        z = self.norm(s)
+        if input_noise > 0:
+            z = z + input_noise * torch.randn(z.shape, generator=generator)
+        return ((self.net(z) - self.act_norm(a)) ** 2).mean()
 
 
 @dataclass
@@ -62,13 +67,13 @@ class BCTask:
 def tasks_for(method: str, translated: pd.DataFrame | None = None,
               raw_demos: dict[str, pd.DataFrame] | None = None, tl: TaskLayout = BOX_PUSH) -> list[BCTask]:
     """The members a method trains, with their data."""
-    if method == "bc_no_translation":
+    if methods.get(method).data == "raw":
         out = []
         for pairing, df in (raw_demos or {}).items():
             robot = layout.robot_arm(pairing)
             out.append(BCTask(f"pi_{robot}", tl.arm_columns(robot) + tl.object_cols, tl.arm_action_columns(robot), df))
         if sorted(t.name for t in out) != ["pi_r1", "pi_r2"]:
-            raise ValueError("bc_no_translation needs the raw demonstrations of both pairings")
+            raise ValueError(f"{method} needs the raw demonstrations of both pairings")
         return out
     if translated is None:
         raise ValueError(f"{method} needs translated demonstrations")
@@ -105,7 +110,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
         idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)]
-        loss = member.loss(s_t[idx], a_t[idx])
+        loss = member.loss(s_t[idx], a_t[idx], cfg.input_noise, gen)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

@@ -204,7 +204,7 @@ class TrainingCallback(BaseCallback):
             self.curve.append({"timesteps": n, **point})
             if self.log:
                 self.log(point, n)
-            if self.progress is not None:
+            if hasattr(self.progress, "set_postfix"):
                 self.progress.set_postfix(success=f"{point['train/success_rate_last100']:.2f}")
         if n >= self._next_ckpt:
             self._next_ckpt += self.cfg.checkpoint_every
@@ -226,7 +226,6 @@ def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg
         checkpoints.load(model, latest)
         resumed_from = model.num_timesteps
     if progress is not None:
-        progress.reset(total=cfg.total_timesteps)
         progress.update(resumed_from)
     callback = TrainingCallback(cfg, checkpoints, log, progress)
     t0 = time.perf_counter()

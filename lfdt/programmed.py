@@ -12,8 +12,8 @@ or the other arm.
 The controller is resolved-rate control of the end effector: hold the take's lateral position,
 advance along the push direction (+y) at the take's speed after its delay for the box's start-to-goal
 distance (measured before the take), then hold. Pushing both sides of the box the same length keeps its
-yaw: the program does not straighten the box, the human must. The arms are overdamped, so a torque of ``damping * qdot / gear`` holds a joint
-speed ``qdot``.
+yaw: the program does not straighten the box, the human must. The arms are overdamped, so a torque of
+``damping * qdot / gear`` holds a joint speed ``qdot``.
 """
 
 from __future__ import annotations

@@ -54,8 +54,8 @@ def execute(df: pd.DataFrame, env_cfg: EnvConfig, cfg: TrackConfig, dyn: Dynamic
     box_idx = [cols.index(c) for c in layout.OBJECT_COLUMNS]
     ee_idx = [[cols.index(f"{a}.ee_x"), cols.index(f"{a}.ee_y")] for a in ("r1", "r2")]
     limits = np.concatenate([np.asarray(a.cfg.joint_range) for a in env.scene.arms])
-    kept, lengths, n_exec = [], [], 0
-    for ep, g in df.groupby("episode_index", sort=True):
+    kept, lengths, n_exec, n_success = [], [], 0, 0
+    for _, g in df.groupby("episode_index", sort=True):
         g = g.sort_values("frame_index")
         plan = np.concatenate([g[s_cols].to_numpy(float), g[n2s_cols].to_numpy(float)[-1:]])
         qpos = np.concatenate([np.clip(plan[0, q_idx], -limits, limits), plan[0, box_idx]])
@@ -80,9 +80,10 @@ def execute(df: pd.DataFrame, env_cfg: EnvConfig, cfg: TrackConfig, dyn: Dynamic
             if term:
                 success = True
                 break
+        n_success += success
         if progress is not None:
             progress()
-        if not success:
+        if not success and cfg.success_only:
             continue
         n = len(states)
         out = pd.DataFrame(np.array(states), columns=s_cols)
@@ -95,8 +96,9 @@ def execute(df: pd.DataFrame, env_cfg: EnvConfig, cfg: TrackConfig, dyn: Dynamic
         out["source_episode_index"] = int(g.source_episode_index.iloc[0])
         kept.append(out)
         lengths.append(n)
-    stats = {"executions": n_exec, "successful_executions": len(kept),
-             "execution_success_rate": len(kept) / max(n_exec, 1),
+    n_ok = len(kept) if cfg.success_only else n_success
+    stats = {"executions": n_exec, "successful_executions": n_ok, "kept_executions": len(kept),
+             "execution_success_rate": n_ok / max(n_exec, 1),
              "mean_execution_length": float(np.mean(lengths)) if lengths else 0.0}
     if not kept:
         raise RuntimeError(f"none of {n_exec} translated demonstrations succeeded when re-executed in Y "

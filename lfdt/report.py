@@ -1,4 +1,5 @@
-"""Table I: aggregation of the evaluation files into tables (md, csv, tex), a plot, and stage wall times."""
+"""Table I: aggregation of the evaluation files into tables (md, csv, tex), a plot, translator diagnostics and
+stage wall times. Methods, their titles, colours and the paper's values come from :mod:`lfdt.methods`."""
 
 from __future__ import annotations
 
@@ -8,38 +9,63 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfdt.evaluation import METHOD_TITLES, PAPER_TABLE1, seed_mean_interval, wilson_interval
+from lfdt import methods
+from lfdt.evaluation import PAPER_TRIALS, seed_state_interval
 
-METHOD_ORDER = ["bc_no_translation", "lfdt_no_dyn", "lfdt_no_id", "lfdt"]
+METHOD_ORDER = list(methods.METHODS)
 
 
-def load_runs(eval_dir: Path) -> pd.DataFrame:
-    """One row per (method, demos, seed) from reports/eval/*.json."""
-    rows = []
-    for f in sorted(Path(eval_dir).glob("*.json")):
-        d = json.loads(f.read_text())
-        rows.append({k: d[k] for k in ("method", "demos", "seed", "successes", "trials", "success_rate",
-                                       "mean_final_box_distance_m", "mean_final_yaw_error_rad")})
-    if not rows:
-        raise FileNotFoundError(f"no evaluation results in {eval_dir}")
-    df = pd.DataFrame(rows)
+def _ordered(df: pd.DataFrame) -> pd.DataFrame:
+    df = df.copy()
     df["order"] = df.method.map({m: i for i, m in enumerate(METHOD_ORDER)})
-    return df.sort_values(["order", "demos", "seed"]).drop(columns="order").reset_index(drop=True)
+    return df.sort_values(["order", "demos", "seed"] if "seed" in df else ["order", "demos"]).drop(columns="order")
 
 
-def aggregate(runs: pd.DataFrame) -> pd.DataFrame:
-    """Per (method, demos): mean over seeds, per-seed values, 95 % intervals, and the paper's value."""
+def load_trials(eval_dir: Path) -> pd.DataFrame:
+    """Every evaluation trial: one row per (method, demos, seed, start state) from reports/eval/*_trials.csv."""
+    files = sorted(Path(eval_dir).glob("*_trials.csv"))
+    if not files:
+        raise FileNotFoundError(f"no evaluation trials (*_trials.csv) in {eval_dir}; run `dvc repro`")
+    df = pd.concat([pd.read_csv(f) for f in files], ignore_index=True)
+    df["success"] = df.success.astype(str).str.lower().map({"true": True, "false": False, "1": True, "0": False})
+    if df.success.isna().any():
+        raise ValueError(f"unreadable success values in {eval_dir}/*_trials.csv")
+    return _ordered(df).reset_index(drop=True)
+
+
+def runs(trials: pd.DataFrame) -> pd.DataFrame:
+    """One row per (method, demos, seed): success over all start states and over the paper's first 20."""
     out = []
-    for (method, demos), g in runs.groupby(["method", "demos"], sort=False):
-        rates = g.success_rate.tolist()
-        lo, hi = wilson_interval(int(g.successes.sum()), int(g.trials.sum()))
-        slo, shi = seed_mean_interval(rates)
-        out.append({"method": method, "demos": int(demos), "seeds": len(g), "trials": int(g.trials.sum()),
-                    "successes": int(g.successes.sum()), "success_rate": float(np.mean(rates)),
-                    "per_seed": ";".join(f"{r:.2f}" for r in rates),
-                    "ci95_low": lo, "ci95_high": hi, "seed_ci95_low": slo, "seed_ci95_high": shi,
-                    "paper_success_rate": PAPER_TABLE1.get(method, {}).get(int(demos), float("nan")) / 100})
+    for (m, d, s), g in trials.groupby(["method", "demos", "seed"], sort=False):
+        g = g.sort_values("trial")
+        out.append({"method": m, "demos": int(d), "seed": int(s), "trials": len(g), "successes": int(g.success.sum()),
+                    "success_rate": float(g.success.mean()),
+                    f"success_rate_first{PAPER_TRIALS}": float(g.success.iloc[:PAPER_TRIALS].mean()),
+                    "mean_final_box_distance_m": float(g.final_box_distance_m.mean()),
+                    "mean_final_yaw_error_rad": float(g.final_yaw_error_rad.mean())})
     return pd.DataFrame(out)
+
+
+def aggregate(trials: pd.DataFrame) -> pd.DataFrame:
+    """Per (method, demos): mean success over seeds and start states, per-seed rates, an interval over both seeds
+    and start states, the same on the paper's 20-trial protocol (the first 20 start states), and the paper's."""
+    out = []
+    for (m, d), g in trials.groupby(["method", "demos"], sort=False):
+        seeds = sorted(g.seed.unique())
+        mat = np.array([g[g.seed == s].sort_values("trial").success.to_numpy(float) for s in seeds])
+        if len({len(r) for r in mat}) != 1:
+            raise ValueError(f"{m} with {d} demos: seeds were evaluated on different numbers of start states")
+        lo, hi = seed_state_interval(mat)
+        first = mat[:, :PAPER_TRIALS]
+        lo20, hi20 = seed_state_interval(first)
+        paper = methods.get(m).paper.get(int(d))
+        out.append({"method": m, "demos": int(d), "seeds": len(seeds), "trials_per_seed": mat.shape[1],
+                    "trials": int(mat.size), "successes": int(mat.sum()), "success_rate": float(mat.mean()),
+                    "per_seed": ";".join(f"{r:.3f}" for r in mat.mean(axis=1)), "ci95_low": lo, "ci95_high": hi,
+                    f"success_rate_first{PAPER_TRIALS}": float(first.mean()), f"first{PAPER_TRIALS}_ci95_low": lo20,
+                    f"first{PAPER_TRIALS}_ci95_high": hi20,
+                    "paper_success_rate": float("nan") if paper is None else paper / 100})
+    return _ordered(pd.DataFrame(out)).reset_index(drop=True)
 
 
 def _pct(x: float) -> str:
@@ -47,74 +73,78 @@ def _pct(x: float) -> str:
 
 
 def markdown(table: pd.DataFrame) -> str:
-    """Table I as markdown: ours (mean, per seed, 95 % interval) beside the paper's."""
+    """Table I as markdown: ours on all start states (per seed, interval), ours on the first 20, the paper's."""
     demos = sorted(table.demos.unique())
-    head = "| method | " + " | ".join(f"{d} demos: ours | {d} demos: paper" for d in demos) + " |"
-    sep = "| --- |" + " --- | --- |" * len(demos)
-    lines = [head, sep]
-    for method in [m for m in METHOD_ORDER if m in set(table.method)]:
+    head = "| method | " + " | ".join(f"{d} demos: ours | {d}: ours, first {PAPER_TRIALS} | {d}: paper"
+                                     for d in demos) + " |"
+    lines = [head, "| --- |" + " --- | --- | --- |" * len(demos)]
+    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
         cells = []
         for d in demos:
-            r = table[(table.method == method) & (table.demos == d)]
+            r = table[(table.method == m) & (table.demos == d)]
+            paper = methods.get(m).paper.get(int(d))
             if r.empty:
-                cells += ["–", _pct(PAPER_TABLE1.get(method, {}).get(d, float("nan")) / 100)]
+                cells += ["–", "–", _pct(float("nan") if paper is None else paper / 100)]
                 continue
             r = r.iloc[0]
-            cells.append(f"**{_pct(r.success_rate)}** ({r.per_seed.replace(';', ', ')}; "
-                         f"95 % CI {100 * r.ci95_low:.0f}–{100 * r.ci95_high:.0f})")
+            per_seed = ", ".join(f"{100 * float(v):.0f}" for v in r.per_seed.split(";"))
+            cells.append(f"**{_pct(r.success_rate)}** ({per_seed}; {100 * r.ci95_low:.0f}–{100 * r.ci95_high:.0f})")
+            cells.append(_pct(r[f"success_rate_first{PAPER_TRIALS}"]))
             cells.append(_pct(r.paper_success_rate))
-        lines.append(f"| {METHOD_TITLES[method]} | " + " | ".join(cells) + " |")
+        lines.append(f"| {methods.get(m).title} | " + " | ".join(cells) + " |")
     n_seeds = int(table.seeds.max())
-    trials = int(table.trials.max() // max(n_seeds, 1))
-    lines.append("")
-    lines.append(f"Success rate over {trials} trials per seed, mean over {n_seeds} seed(s); per-seed rates in "
-                 "brackets; 95 % CI: Wilson interval of the pooled trials. Paper: Kobayashi et al. 2023, Table I.")
+    per_seed = int(table.trials_per_seed.max())
+    lines += ["", f"Success rate over {per_seed} start states per seed (the same states for every row), mean over "
+              f"{n_seeds} seed(s) (n = {n_seeds * per_seed} trials per cell); in brackets the per-seed rates in % and "
+              "a 95 % interval that counts both the seeds and the start states as random (two-way random effects, "
+              f"t with Satterthwaite's degrees of freedom). 'First {PAPER_TRIALS}': the paper's protocol "
+              f"({PAPER_TRIALS} trials per seed), on the first start states of the same list. "
+              "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper."]
     return "\n".join(lines) + "\n"
 
 
 def latex(table: pd.DataFrame) -> str:
     """Table I as a LaTeX tabular (ours / paper per demo count)."""
     demos = sorted(table.demos.unique())
-    cols = "l" + "rr" * len(demos)
-    lines = [r"\begin{tabular}{" + cols + "}", r"\toprule",
+    lines = [r"\begin{tabular}{l" + "rr" * len(demos) + "}", r"\toprule",
              "Method & " + " & ".join(rf"\multicolumn{{2}}{{c}}{{{d} demos}}" for d in demos) + r" \\",
              " & " + " & ".join("ours & paper" for _ in demos) + r" \\", r"\midrule"]
-    for method in [m for m in METHOD_ORDER if m in set(table.method)]:
+    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
         cells = []
         for d in demos:
-            r = table[(table.method == method) & (table.demos == d)]
-            ours = "--" if r.empty else f"{100 * r.iloc[0].success_rate:.1f}"
-            paper = PAPER_TABLE1.get(method, {}).get(d)
-            cells += [ours, "--" if paper is None else f"{paper:.1f}"]
-        lines.append(f"{METHOD_TITLES[method]} & " + " & ".join(cells) + r" \\")
+            r = table[(table.method == m) & (table.demos == d)]
+            paper = methods.get(m).paper.get(int(d))
+            cells += ["--" if r.empty else f"{100 * r.iloc[0].success_rate:.1f}",
+                      "--" if paper is None else f"{paper:.1f}"]
+        lines.append(f"{methods.get(m).title} & " + " & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}"]
     return "\n".join(lines).replace("%", r"\%") + "\n"
 
 
-def plot(runs: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
-    """Success rate against demo count: one line per method (mean over seeds), seeds as points, paper dashed."""
+def plot(run_rows: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
+    """Success rate against demo count: one line per method (mean), its interval as a band, seeds as points,
+    the paper's values dashed."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8.4, 4.2), dpi=120)
-    colours = {"bc_no_translation": "tab:gray", "lfdt_no_dyn": "tab:orange", "lfdt_no_id": "tab:red",
-               "lfdt": "tab:blue"}
-    for method in [m for m in METHOD_ORDER if m in set(table.method)]:
-        t = table[table.method == method].sort_values("demos")
-        c = colours[method]
-        ax.plot(t.demos, 100 * t.success_rate, "-o", color=c, label=f"{METHOD_TITLES[method]} (ours)")
-        r = runs[runs.method == method]
-        jitter = (r.seed - r.seed.mean()) * 2.0
-        ax.scatter(r.demos + jitter, 100 * r.success_rate, color=c, alpha=0.4, s=18)
-        paper = PAPER_TABLE1.get(method, {})
-        ax.plot(sorted(paper), [paper[d] for d in sorted(paper)], "--", color=c, alpha=0.5, lw=1)
+    fig, ax = plt.subplots(figsize=(8.8, 4.4), dpi=120)
+    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
+        meth = methods.get(m)
+        t = table[table.method == m].sort_values("demos")
+        ax.plot(t.demos, 100 * t.success_rate, "-o", color=meth.colour, label=meth.title)
+        ax.fill_between(t.demos, 100 * t.ci95_low, 100 * t.ci95_high, color=meth.colour, alpha=0.08)
+        r = run_rows[run_rows.method == m]
+        ax.scatter(r.demos + (r.seed - r.seed.mean()) * 2.0, 100 * r.success_rate, color=meth.colour, alpha=0.4, s=16)
+        if meth.paper:
+            ds = sorted(meth.paper)
+            ax.plot(ds, [meth.paper[d] for d in ds], "--", color=meth.colour, alpha=0.5, lw=1)
     ax.set_xlabel("demonstrations per pairing")
     ax.set_ylabel("success rate (%)")
     ax.set_ylim(-3, 103)
     ax.set_xticks(sorted(table.demos.unique()))
-    ax.set_title("2D dual-arm box push (dashed: paper's Table I; points: seeds)")
+    ax.set_title("2D dual-arm box push (dashed: paper's Table I; points: seeds; bands: 95 % intervals)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
@@ -124,20 +154,61 @@ def plot(runs: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
     return path
 
 
+DIAGNOSTICS = {
+    "selected_iteration": "iteration kept (lowest held-out translation loss)",
+    "selected_heldout_loss": "held-out translation loss there",
+    "dyn/real_robot": "L_dyn, real robot's columns",
+    "dyn/missing_robot": "L_dyn, missing robot's columns",
+    "dyn/object": "L_dyn, box's columns",
+    "D/accuracy_translated_demos": "D's accuracy on translated demos",
+    "D/accuracy_translated_random": "D's accuracy on translated random motion",
+    "labels/real_robot_rmse": "F^-1 labels of the real robot vs its recorded actions (RMS)",
+    "fk/missing_robot_ee_error_m": "missing arm's end vs FK of its joints (m)",
+    "diag/missing_robot_ee_to_hand_m": "missing robot's end to the human's hand (m)",
+    "diag/robot_ee_error_m": "real robot's end vs the source (m)",
+    "replay_success_rate": "open-loop replay of the labels in Y solves the task",
+}
+"""Translator diagnostics shown in the README, with their meaning."""
+
+
+def translator_diagnostics(translator_dir: Path, track_dir: Path | None = None) -> pd.DataFrame:
+    """Per (method, demos): the translator diagnostics averaged over seeds (and the re-execution success)."""
+    rows = []
+    for f in sorted(Path(translator_dir).glob("*.json")):
+        d = json.loads(f.read_text())
+        seeds = list(d["seeds"].values())
+        row = {"method": d["method"], "demos": d["demos"], "seeds": len(seeds)}
+        for k in DIAGNOSTICS:
+            vals = [s[k] for s in seeds if isinstance(s.get(k), int | float)]
+            row[k] = float(np.mean(vals)) if vals else float("nan")
+        rows.append(row)
+    if track_dir is not None:
+        for f in sorted(Path(track_dir).glob("*.json")):
+            d = json.loads(f.read_text())
+            seeds = list(d["seeds"].values())
+            rows.append({"method": d["method"], "demos": d["demos"], "seeds": len(seeds),
+                         "execution_success_rate": float(np.mean([s["execution_success_rate"] for s in seeds]))})
+    if not rows:
+        raise FileNotFoundError(f"no translator reports in {translator_dir}")
+    return _ordered(pd.DataFrame(rows)).reset_index(drop=True)
+
+
 def stage_times(reports: Path) -> pd.DataFrame:
     """Wall time of every stage run that produced the current reports, summed per stage."""
     rows = []
     sources = {"train_experts": "experts/*_train.json", "collect_random": "random/*.json",
                "collect_demos": "demos/*.json", "fit_dynamics": "dynamics.json",
-               "train_translator": "translator/*.json", "train_bc": "bc/*.json", "evaluate": "eval/*.json"}
+               "train_translator": "translator/*.json", "track_demos": "track/*.json", "train_bc": "bc/*.json",
+               "evaluate": "eval/*.json"}
     for name, pattern in sources.items():
-        files = [f for f in sorted(reports.glob(pattern)) if not f.name.endswith("_curve.json")]
         walls = []
-        for f in files:
+        for f in sorted(reports.glob(pattern)):
             d = json.loads(f.read_text())
-            w = d.get("stage_wall_s", d.get("wall_time_s", d.get("wall_s")))
+            w = d.get("stage_wall_s", d.get("job_wall_s", d.get("wall_time_s")))
             if w is not None:
                 walls.append(float(w))
+        if name == "train_experts" and walls:
+            walls = [max(walls)]  # both pairings train side by side in one stage
         if walls:
             rows.append({"stage": name, "runs": len(walls), "total_s": sum(walls), "mean_s": float(np.mean(walls))})
     return pd.DataFrame(rows)

@@ -63,12 +63,27 @@ def wall_since_start() -> float:
     return time.time() - psutil.Process().create_time()
 
 
-def add_config_arguments(ap, methods) -> None:
-    """``--method``, ``--demos``, ``--seed`` (one matrix instance) and ``--params``."""
+def matrix_arguments(description: str, methods) -> tuple[str, int, str, Params]:
+    """``--method`` and ``--demos`` of one matrix instance (its seeds come from ``grid.seeds``) and ``--params``;
+    returns the method, the demonstration count, the params path and the validated params."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--method", required=True, choices=sorted(methods))
     ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--seed", required=True, type=int)
     ap.add_argument("--params", default="params.yaml")
+    args = ap.parse_args()
+    p = params(args.params)
+    if args.demos > p.demos.per_pairing:
+        raise ParamsError(f"--demos {args.demos} is more than demos.per_pairing = {p.demos.per_pairing}")
+    return args.method, args.demos, args.params, p
+
+
+def group_report(results: list[dict], wall_key: str = "stage_wall_s") -> dict:
+    """The metrics of a matrix instance's jobs, keyed by seed, with the stage's own wall time."""
+    first = results[0]["metrics"]
+    return {"method": first["method"], "demos": first["demos"],
+            "seeds": {str(r["metrics"]["seed"]): r["metrics"] for r in results}, wall_key: wall_since_start()}
 
 
 def task_arguments(description: str, tasks) -> tuple[str, Params]:

@@ -33,9 +33,24 @@ def project_root(start: Path | None = None) -> Path:
     return here
 
 
+def workspace_root() -> Path:
+    """The DVC workspace whose store the runs go to.
+
+    ``dvc exp run --temp`` and ``dvc queue`` run stages in a copy under ``<workspace>/.dvc/tmp/exps/`` that DVC
+    deletes afterwards; ``DVC_ROOT`` (set by DVC) then names that copy, and the workspace is the directory that
+    holds its ``.dvc``. Without DVC, the nearest directory holding dvc.yaml.
+    """
+    root = Path(os.environ.get("DVC_ROOT") or project_root()).resolve()
+    parts = root.parts
+    for i in range(len(parts) - 3):
+        if parts[i:i + 3] == (".dvc", "tmp", "exps"):
+            return Path(*parts[:i])
+    return root
+
+
 def tracking_uri() -> str:
-    """``MLFLOW_TRACKING_URI`` if set, else an absolute sqlite URI of ``<root>/mlflow.db``."""
-    return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{project_root() / 'mlflow.db'}"
+    """``MLFLOW_TRACKING_URI`` if set, else an absolute sqlite URI of ``<workspace>/mlflow.db``."""
+    return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{workspace_root() / 'mlflow.db'}"
 
 
 def git_commit(root: Path | None = None) -> str:

@@ -8,7 +8,7 @@ normalised Y states (from Y's random motion) from G's outputs. The generator's l
 
 with L_dyn = ||F(y_hat_t, F^-1(y_hat_t, y_hat_t+1)) - y_hat_t+1||^2 through the frozen dynamics
 models and L_id = ||y_hat^Ri - x^Ri||^2 on the robot that is really there. The ablations are the
-same code with a weight at zero (:data:`METHOD_OVERRIDES`).
+same code with a weight at zero (:mod:`lfdt.methods`).
 
 Normalisation: x^Ri and x^O use Y's statistics of the same columns (so L_id compares like with
 like); x^H uses the statistics of the human columns in that pairing's X random data.
@@ -31,28 +31,22 @@ import torch
 import torch.nn.functional as nnf
 from torch import nn
 
-from lfdt import data, layout
+from lfdt import data, layout, methods
 from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.envs import BoxPushEnv
 from lfdt.layout import BOX_PUSH, TaskLayout
 from lfdt.nets import Normalizer, mlp
 
-METHOD_OVERRIDES: dict[str, dict[str, float]] = {
-    "lfdt": {},
-    "lfdt_no_dyn": {"lambda_dyn": 0.0},
-    "lfdt_no_id": {"lambda_id": 0.0},
-}
-"""Each translator method is the configured loss with these weights overridden."""
-
 PAIRING_INDEX = {p: i for i, p in enumerate(layout.PAIRINGS)}
 
 
 def method_config(method: str, cfg: TranslatorConfig) -> TranslatorConfig:
-    """The translator config of a method (an ablation sets one weight to zero)."""
-    if method not in METHOD_OVERRIDES:
-        raise ValueError(f"unknown translator method {method!r}; expected one of {sorted(METHOD_OVERRIDES)}")
-    return cfg.model_copy(update=METHOD_OVERRIDES[method])
+    """The translator config of a translator method (:mod:`lfdt.methods`; an ablation sets one weight to zero)."""
+    m = methods.get(method)
+    if not m.trains_translator:
+        raise ValueError(f"{method!r} trains no translator; translator methods: {methods.translator_methods()}")
+    return cfg.model_copy(update=m.overrides)
 
 
 def canonical_x_columns(pairing: str, tl: TaskLayout = BOX_PUSH) -> list[str]:
@@ -199,6 +193,11 @@ class Translator(nn.Module):
         self.register_buffer("fk_dt", torch.tensor(kinematics.dt if kinematics else 1.0))
         self.register_buffer("y_mean", torch.zeros(y_dim))
         self.register_buffer("y_std", torch.ones(y_dim))
+        # the human's hand -> the missing robot's end, per pairing (for lambda_hand): x index, y index, scale, offset
+        self.register_buffer("hand_src", torch.zeros(n_p, 2, dtype=torch.long))
+        self.register_buffer("hand_dst", torch.zeros(n_p, 2, dtype=torch.long))
+        self.register_buffer("hand_scale", torch.ones(n_p, 2))
+        self.register_buffer("hand_offset", torch.zeros(n_p, 2))
 
     def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor,
                  x_prev_n: torch.Tensor | None = None) -> torch.Tensor:
@@ -225,18 +224,31 @@ class Translator(nn.Module):
                                 torch.zeros_like(y))
         return y
 
+    def generate_pair(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pairing_idx: torch.Tensor
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(y_hat_t, y_hat_t+1) of transitions (x, x2) whose previous states are x0, in one pass of G."""
+        n = len(x)
+        if not len(self.fk_q):
+            y = self._raw_generate(torch.cat([x, x2]), pairing_idx.repeat(2))
+            return y[:n], y[n:]
+        y = self._raw_generate(torch.cat([x0, x, x2]), pairing_idx.repeat(3))
+        y0, y1, y2 = y[:n], y[n:2 * n], y[2 * n:]
+        return self.apply_kinematics(y1, y0), self.apply_kinematics(y2, y1)
+
     def apply_kinematics(self, y_n: torch.Tensor, y_prev_n: torch.Tensor | None = None) -> torch.Tensor:
         """Each arm's end columns from its joint angles; its joint velocities from the change since ``y_prev_n``
         (when given). Normalised units in and out."""
+        qi, dqi, ei = self.fk_q, self.fk_dq, self.fk_ee  # (arms, joints), (arms, joints), (arms, 2)
+        q = y_n[:, qi] * self.y_std[qi] + self.y_mean[qi]  # (batch, arms, joints)
+        phi = torch.cumsum(q, dim=-1)
+        ee = torch.stack([self.fk_base[:, 0] - (self.fk_links * torch.sin(phi)).sum(-1),
+                          self.fk_base[:, 1] + (self.fk_links * torch.cos(phi)).sum(-1)], dim=-1)
         y_n = y_n.clone()
-        for k in range(len(self.fk_q)):
-            qi, dqi, ei = self.fk_q[k], self.fk_dq[k], self.fk_ee[k]
-            q = y_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
-            ee = forward_kinematics(q, self.fk_links[k], self.fk_base[k])
-            y_n[:, ei] = (ee - self.y_mean[ei]) / self.y_std[ei]
-            if y_prev_n is not None:
-                q_prev = y_prev_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
-                y_n[:, dqi] = ((q - q_prev) / self.fk_dt - self.y_mean[dqi]) / self.y_std[dqi]
+        y_n[:, ei.reshape(-1)] = ((ee - self.y_mean[ei]) / self.y_std[ei]).reshape(len(y_n), -1)
+        if y_prev_n is not None:
+            q_prev = y_prev_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
+            dq = ((q - q_prev) / self.fk_dt - self.y_mean[dqi]) / self.y_std[dqi]
+            y_n[:, dqi.reshape(-1)] = dq.reshape(len(y_n), -1)
         return y_n
 
     def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
@@ -283,6 +295,12 @@ def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dic
         translator.x_norms[pairing].mean.copy_(mean)
         translator.x_norms[pairing].std.copy_(std)
         k = PAIRING_INDEX[pairing]
+        missing = "r2" if layout.robot_arm(pairing) == "r1" else "r1"
+        for n, (xc, yc) in enumerate(zip(tl.position_cols["h"], tl.position_cols[missing])):
+            i, j = cols.index(xc), y_cols.index(yc)
+            translator.hand_src[k, n], translator.hand_dst[k, n] = i, j
+            translator.hand_scale[k, n] = std[i] / dyn.y_norm.std[j]
+            translator.hand_offset[k, n] = (mean[i] - dyn.y_norm.mean[j]) / dyn.y_norm.std[j]
         for xc, yc in skip_pairs(pairing, object_mode, hand_skip, tl):
             i, j = cols.index(xc), y_cols.index(yc)
             # x_raw = x_n * std_x + mean_x; y_n = (x_raw - mean_y) / std_y
@@ -351,21 +369,25 @@ class _Losses:
         obj = [tl.state_columns("Y").index(c) for c in tl.object_cols]
         self.object_mask = torch.zeros(y_dim, dtype=torch.bool)
         self.object_mask[obj] = True
+        self.dyn_weight = torch.ones(y_dim)
+        self.dyn_weight[obj] = cfg.dyn_object_weight
 
     def __call__(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pidx: torch.Tensor
                  ) -> dict[str, torch.Tensor]:
         """y_hat, y_hat2, the per-column squared dynamics error and the identity loss of a batch
         (``x0``: the states one step before ``x``, used only with Y's robot model)."""
-        kin = bool(len(self.tr.fk_q))
-        y_hat = self.tr.generate(x, pidx, x0 if kin else None)
-        y_hat2 = self.tr.generate(x2, pidx, x if kin else None)
+        y_hat, y_hat2 = self.tr.generate_pair(x0, x, x2, pidx)
         a_tilde = self.dyn.inverse_model(y_hat, y_hat2)
         y_tilde = self.dyn.forward_model(y_hat, a_tilde)
         dyn_sq = ((y_tilde - y_hat2) / self.dyn_scale) ** 2
         y_robot = y_hat[self.robot_mask[pidx]].view(-1, self.n_robot)
         l_id = ((y_robot - x[:, :self.n_robot]) ** 2).mean()
-        return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq, "dyn": dyn_sq.mean(),
-                "id": l_id}
+        tr = self.tr
+        hand = torch.gather(x, 1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]
+        l_hand = ((torch.gather(y_hat, 1, tr.hand_dst[pidx]) - hand) ** 2).mean()
+        return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq,
+                "dyn": (dyn_sq * self.dyn_weight).mean(),
+                "id": l_id, "hand": l_hand}
 
     def dyn_split(self, dyn_sq: torch.Tensor, pidx: torch.Tensor) -> dict[str, float]:
         """L_dyn split by the real robot's columns, the missing robot's and the object's."""
@@ -377,7 +399,7 @@ class _Losses:
     def selection(self, out: dict[str, torch.Tensor]) -> torch.Tensor:
         """The held-out translation loss a checkpoint is kept by: eq. 6 without the adversarial term (D changes
         while training, so its loss is no yardstick across iterations)."""
-        return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"]
+        return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"] + self.cfg.lambda_hand * out["hand"]
 
 
 def _normalised(tr: Translator, sets: dict[str, Transitions]
@@ -449,20 +471,23 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
         else:
             fake_d = fake
         y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_hat),), generator=gen)]
-        d_real, d_fake = tr.D(y_real), tr.D(fake_d)
+        d_both = tr.D(torch.cat([y_real, fake_d]))
+        d_real, d_fake = d_both[:len(y_real)], d_both[len(y_real):]
         l_d = d_loss_fn(d_real, d_fake)
         opt_d.zero_grad(set_to_none=True)
         l_d.backward()
         opt_d.step()
         # --- G step
         l_adv = g_loss_fn(tr.D(y_hat))
-        loss = cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
+        loss = (cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
+                + cfg.lambda_hand * out["hand"])
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         opt_g.step()
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
         for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", out["dyn"]), ("loss/id", out["id"]),
+                     ("loss/hand", out["hand"]),
                      ("loss/G_total", loss), ("D/accuracy", acc)):
             sums[k] = sums.get(k, 0.0) + v.item()
         if progress is not None:

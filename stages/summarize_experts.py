@@ -1,16 +1,21 @@
-"""DVC stage: reports/experts.json, one entry per pairing (expert evaluation + demonstration statistics)."""
+"""DVC stage: reports/experts.json, one entry per pairing (expert evaluation + demonstration statistics), and the
+protocol's premise measured: both robots replaying their programs together in Y, nobody adapting."""
 
 import argparse
 import json
 from pathlib import Path
 
-from lfdt import layout, stage
+from lfdt import layout, programmed, stage
+
+PREMISE_EPISODES = 200
 
 
 def run() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.parse_args()
-    out = {}
+    ap.add_argument("--params", default="params.yaml")
+    args = ap.parse_args()
+    p = stage.params(args.params)
+    out: dict = {"protocol": p.demos.protocol}
     for pairing in layout.PAIRINGS:
         train = json.loads(Path(f"reports/experts/{pairing}_train.json").read_text())
         demos = json.loads(Path(f"reports/demos/{pairing}.json").read_text())
@@ -25,7 +30,14 @@ def run() -> None:
             "env_steps_per_s": train["env_steps_per_s"],
             "gradient_steps_per_s": train["gradient_steps_per_s"],
         }
+    # start states of the development block: never those of the evaluation
+    out["programs_together_in_Y"] = {
+        "success_rate": programmed.programs_together_success(p.env, p.demos.program, PREMISE_EPISODES),
+        "episodes": PREMISE_EPISODES,
+        "description": "both robots replay takes of their own programs together in Y, nobody adapting"}
     stage.write_json("reports/experts.json", out)
+    print(f"two programmed robots together in Y: {out['programs_together_in_Y']['success_rate']:.2f} success over "
+          f"{PREMISE_EPISODES} start states")
 
 
 if __name__ == "__main__":

@@ -4,8 +4,8 @@ import argparse
 import json
 from pathlib import Path
 
-from lfdt import stage
-from lfdt.evaluation import METHOD_TITLES, wilson_interval
+from lfdt import methods, stage
+from lfdt.evaluation import wilson_interval
 from lfdt.robot import twin, twin_pipeline
 
 
@@ -27,7 +27,7 @@ def run() -> None:
             lo, hi = wilson_interval(k, n)
             pk, pn = twin_pipeline.PAPER_REAL[task][method]
             ci = f"{100 * lo:.0f}–{100 * hi:.0f} %"
-            lines.append(f"| {task} | {METHOD_TITLES[method]} | {k}/{n} | {ci} | {pk}/{pn} |")
+            lines.append(f"| {task} | {methods.get(method).title} | {k}/{n} | {ci} | {pk}/{pn} |")
     lines += ["", f"Data per task: {p.random_samples} random-motion samples per domain, {p.demos_per_pairing} + "
               f"{p.demos_per_pairing} demonstrations, {p.trials} trials per method, seed {p.seed}. "
               "Paper: Kobayashi et al. 2023, §IV-E."]

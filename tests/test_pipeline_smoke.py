@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from lfdt import data, layout
+from lfdt import data, layout, methods
 from lfdt.config import validate_params
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,18 +49,20 @@ def project(tmp_path_factory):
     return dst, out
 
 
-METHODS = ("bc_no_translation", "lfdt", "lfdt_no_dyn", "lfdt_no_id")
+METHODS = tuple(methods.METHODS)
+TRANSLATORS = tuple(methods.translator_methods())
+SEEDS = (0, 1)
 
 
 def test_every_stage_ran(project):
     _, out = project
-    stages = ["train_experts@R1H", "train_experts@HR2", "collect_random@Y", "collect_random@R1H",
+    stages = ["train_experts", "collect_random@Y", "collect_random@R1H",
               "collect_random@HR2", "collect_demos@R1H", "collect_demos@HR2", "summarize_experts", "fit_dynamics",
-              "select_demos@3-0", "report", "twin_report"]
+              "select_demos@3", "track_demos@3", "report", "twin_report"]
     stages += [f"{s}@{t}" for s in ("twin_collect", "twin_train", "twin_evaluate")
                for t in ("block_push", "peg_insertion")]
-    stages += [f"train_translator@{m}-3-0" for m in METHODS[1:]]
-    stages += [f"{s}@{m}-3-0" for s in ("train_bc", "evaluate") for m in METHODS]
+    stages += [f"train_translator@{m}-3" for m in TRANSLATORS]
+    stages += [f"{s}@{m}-3" for s in ("train_bc", "evaluate") for m in METHODS]
     for stage in stages:
         assert f"'{stage}'" in out
 
@@ -83,8 +85,10 @@ def test_artifact_schemas(project):
 def test_metrics_files(project):
     dst, _ = project
     summary = json.loads((dst / "reports/experts.json").read_text())
-    assert set(summary) == set(layout.PAIRINGS)
-    for entry in summary.values():
+    assert summary["protocol"] == "programmed_robot"
+    assert 0 <= summary["programs_together_in_Y"]["success_rate"] <= 1
+    for pairing in layout.PAIRINGS:
+        entry = summary[pairing]
         assert entry["episodes"] == 3 and 0 <= entry["success_rate"] <= 1
         assert entry["mean_demo_length"] > 0 and entry["demo_attempts"] == 4
     for domain in layout.DOMAINS:
@@ -99,35 +103,54 @@ def test_second_half_artifacts(project):
     dyn = json.loads((dst / "reports/dynamics.json").read_text())
     assert {"forward_ratio", "inverse_ratio", "forward_mse", "inverse_mse"} <= set(dyn)
     assert (dst / "models/dynamics/dynamics.pt").exists() and (dst / "models/dynamics/dynamics.json").exists()
-    for m in METHODS[1:]:
-        name = f"{m}-d3-s0"
-        path = dst / f"data/bc_train/{name}/translated.parquet"
-        meta = data.read_metadata(path)
-        assert meta["kind"] == "translated" and meta["method"] == m and meta["demos"] == 3
-        df = data.read_transitions(path)
-        assert df.episode_index.nunique() == 6 and set(df.source_pairing) == set(layout.PAIRINGS)
-        want = [layout.STATE_PREFIX + c for c in layout.state_columns("Y")]
-        want += [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]
-        assert set(want) <= set(df.columns) and df[want].notna().all().all()
-        tr = json.loads((dst / f"reports/translator/{name}.json").read_text())
-        assert tr["replay_box_position_error_m"] >= 0 and 0 <= tr["final/D/accuracy"] <= 1
+    for m in TRANSLATORS:
+        tr = json.loads((dst / f"reports/translator/{m}-d3.json").read_text())
+        assert set(tr["seeds"]) == {str(s) for s in SEEDS}
+        for seed in SEEDS:
+            path = dst / f"data/bc_train/{m}-d3/s{seed}/translated.parquet"
+            meta = data.read_metadata(path)
+            assert meta["kind"] == "translated" and meta["method"] == m and meta["demos"] == 3
+            assert meta["seed"] == seed
+            df = data.read_transitions(path)
+            assert df.episode_index.nunique() == 6 and set(df.source_pairing) == set(layout.PAIRINGS)
+            want = [layout.STATE_PREFIX + c for c in layout.state_columns("Y")]
+            want += [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]
+            assert set(want) <= set(df.columns) and df[want].notna().all().all()
+            d = tr["seeds"][str(seed)]
+            assert d["replay_box_position_error_m"] >= 0 and 0 <= d["final/D/accuracy"] <= 1
+            # the diagnostics the README shows
+            assert {"dyn/real_robot", "dyn/missing_robot", "dyn/object", "D/accuracy_translated_demos",
+                    "D/accuracy_translated_random", "labels/real_robot_rmse", "fk/missing_robot_ee_error_m",
+                    "replay_success_rate", "selected_iteration"} <= set(d)
+            assert d["fk/missing_robot_ee_error_m"] < 1e-5  # translator.kinematics: forward
+    track = json.loads((dst / "reports/track/lfdt_track-d3.json").read_text())
+    for seed in SEEDS:
+        assert track["seeds"][str(seed)]["executions"] == 6
+        meta = data.read_metadata(dst / f"data/bc_train/lfdt_track-d3/s{seed}/executed.parquet")
+        assert meta["kind"] == "executed"
     for m in METHODS:
-        name = f"{m}-d3-s0"
-        ev = json.loads((dst / f"reports/eval/{name}.json").read_text())
-        assert ev["trials"] == 2 and len(ev["per_trial"]) == 2
-        assert (dst / f"reports/videos/{name}/trial00.mp4").stat().st_size > 1000
-        assert list((dst / f"models/bc/{name}").glob("*.pt"))
-    assert len(list((dst / "models/bc/bc_no_translation-d3-s0").glob("*.pt"))) == 2
+        ev = json.loads((dst / f"reports/eval/{m}-d3.json").read_text())
+        trials = (dst / f"reports/eval/{m}-d3_trials.csv").read_text().splitlines()
+        assert len(trials) == 1 + 3 * len(SEEDS)
+        for seed in SEEDS:
+            assert ev["seeds"][str(seed)]["trials"] == 3
+            assert (dst / f"reports/videos/{m}-d3/s{seed}/trial00.mp4").stat().st_size > 1000
+            assert list((dst / f"models/bc/{m}-d3/s{seed}").glob("*.pt"))
+    assert len(list((dst / "models/bc/bc_no_translation-d3/s0").glob("*.pt"))) == 2
     runs = (dst / "reports/table1_runs.csv").read_text().splitlines()
-    assert runs[0].startswith("method,demos,seed,successes,trials") and len(runs) == 1 + len(METHODS)
+    assert runs[0].startswith("method,demos,seed,trials,successes,success_rate,success_rate_first20")
+    assert len(runs) == 1 + len(METHODS) * len(SEEDS)
+    assert any(r.startswith("lfdt_track,") for r in runs)
     table = (dst / "reports/table1.csv").read_text().splitlines()
     assert len(table) == 1 + len(METHODS)
     md = (dst / "reports/table1.md").read_text()
-    assert "LfDT" in md and "paper" in md and "80.0 %" not in md.split("|")[2]
+    assert "LfDT" in md and "paper" in md and "first 20" in md
     assert (dst / "reports/table1.tex").read_text().startswith("\\begin{tabular}")
     assert (dst / "reports/success_vs_demos.png").stat().st_size > 5000
+    assert (dst / "reports/translator_diagnostics.csv").read_text().startswith("method,demos,seeds")
     rep = json.loads((dst / "reports/report.json").read_text())
-    assert rep["mlflow_child_runs"] == 2 + 3 + 2 + 1 + 3 + 4 + 4  # every run behind the table
+    per_seed = len(TRANSLATORS) + 1 + 2 * len(METHODS)  # translators, re-execution, BC and evaluation
+    assert rep["mlflow_child_runs"] == 2 + 3 + 2 + 1 + per_seed * len(SEEDS)  # every run behind the table
 
 
 def _free_port() -> int:
@@ -170,7 +193,7 @@ def test_mlflow_server_serves_the_pipeline_runs(project):
         assert {"train_experts", "collect_random", "collect_demos", "fit_dynamics", "train_translator", "train_bc",
                 "evaluate", "report"} <= set(by_stage)
         ev = by_stage["evaluate"]
-        assert len(ev) == 4
+        assert len(ev) == len(METHODS) * len(SEEDS)
         for r in ev:  # same param and metric names across methods, so the UI can compare them
             params = {p["key"] for p in r["data"]["params"]}
             metrics = {m["key"] for m in r["data"]["metrics"]}
@@ -214,7 +237,33 @@ def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(proje
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     out = _dvc(["repro"], dst)
     ran = {line.split("'")[1] for line in out.splitlines() if line.startswith("Running stage")}
-    downstream = {"collect_demos@HR2", "collect_demos@R1H", "summarize_experts", "select_demos@3-0", "report"}
-    downstream |= {f"train_translator@{m}-3-0" for m in METHODS[1:]}
-    downstream |= {f"{s}@{m}-3-0" for s in ("train_bc", "evaluate") for m in METHODS}
+    downstream = {"collect_demos@HR2", "collect_demos@R1H", "summarize_experts", "select_demos@3", "track_demos@3",
+                  "report"}
+    downstream |= {f"train_translator@{m}-3" for m in TRANSLATORS}
+    downstream |= {f"{s}@{m}-3" for s in ("train_bc", "evaluate") for m in METHODS}
     assert ran == downstream  # experts, random motion and dynamics are not rerun
+
+
+def _runs_in(db: Path) -> list[dict]:
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        rows = con.execute("SELECT r.run_uuid, t.value FROM runs r LEFT JOIN tags t ON t.run_uuid = r.run_uuid "
+                           "AND t.key = 'dvc.exp_name'").fetchall()
+    return [{"run": r, "exp": e} for r, e in rows]
+
+
+def test_temp_experiment_logs_to_the_workspace_store(project):
+    """`dvc exp run --temp` runs in a copy under .dvc/tmp/exps that DVC deletes; its runs must land in the
+    workspace's mlflow.db, not in the copy's."""
+    dst, _ = project
+    subprocess.run(["git", "add", "-A"], cwd=dst, check=True, capture_output=True)
+    subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "smoke"], cwd=dst,
+                   check=True, capture_output=True)
+    before = _runs_in(dst / "mlflow.db")
+    _dvc(["exp", "run", "--temp", "-n", "smoke-temp", "-S", "evaluation.video_size=64"], dst)
+    after = _runs_in(dst / "mlflow.db")
+    new = [r for r in after if r["run"] not in {b["run"] for b in before}]
+    assert new, "the --temp experiment's runs are not in the workspace's mlflow.db"
+    assert {r["exp"] for r in new} == {"smoke-temp"}
+    assert not list((dst / ".dvc/tmp/exps").glob("**/mlflow.db"))

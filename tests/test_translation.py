@@ -17,8 +17,10 @@ def test_methods_are_weights_at_zero():
     assert translation.method_config("lfdt_no_dyn", base).lambda_dyn == 0 and \
         translation.method_config("lfdt_no_dyn", base).lambda_id == 3.0
     assert translation.method_config("lfdt_no_id", base).lambda_id == 0
-    with pytest.raises(ValueError, match="unknown translator method"):
+    with pytest.raises(ValueError, match="unknown method 'lfdt_magic'"):
         translation.method_config("lfdt_magic", base)
+    with pytest.raises(ValueError, match="trains no translator"):
+        translation.method_config("bc_no_translation", base)
 
 
 def test_canonical_columns_and_robot_slot():
@@ -87,3 +89,67 @@ def test_replay_of_true_transitions_is_consistent(tiny):
     acts = [f"action.{c}" for c in layout.action_columns("Y")]
     shuffled[acts] = -shuffled[acts].to_numpy()
     assert translation.replay_check(shuffled, env)["replay_box_position_error_m"] > 1e-4
+
+
+def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
+    """With Y's robot model, a translated episode's ends are the FK of its joints and its joint velocities the
+    change of its joint angles per control step (zero at the start, where the arms are at rest)."""
+    env, paths, dyn = tiny
+    kin = translation.Kinematics.of_box_push(env)
+    tr = translation.Translator([16], kinematics=kin)
+    tr.y_mean.copy_(dyn.y_norm.mean)
+    tr.y_std.copy_(dyn.y_norm.std)
+    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
+    y_cols = layout.state_columns("Y")
+    from lfdt.envs import arm_specs, forward_kinematics
+
+    for p in layout.PAIRINGS:
+        t = random_x[p]
+        ep = t.x[t.episode == t.episode[0]]
+        y = dyn.y_norm.inverse(tr.translate(ep, p)).numpy()
+        for arm in arm_specs("Y", env):
+            q = y[:, [y_cols.index(f"{arm.name}.q{i}") for i in range(3)]]
+            ee = y[:, [y_cols.index(f"{arm.name}.ee_x"), y_cols.index(f"{arm.name}.ee_y")]]
+            dq = y[:, [y_cols.index(f"{arm.name}.dq{i}") for i in range(3)]]
+            np.testing.assert_allclose(ee, forward_kinematics(arm, q), atol=1e-4)
+            np.testing.assert_allclose(dq[0], 0.0, atol=1e-3)
+            np.testing.assert_allclose(dq[1:], np.diff(q, axis=0) / kin.dt, atol=1e-3)
+
+
+def test_held_out_split_and_checkpoint_selection(tiny):
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    train, held = translation.split_held_out(random_x, 0.25, seed=0)
+    for p in layout.PAIRINGS:
+        assert not set(train[p].episode) & set(held[p].episode)
+        assert len(train[p].x) + len(held[p].x) == len(random_x[p].x) and len(held[p].x) > 0
+    assert translation.split_held_out(random_x, 0.0, seed=0)[1] is None
+    cfg = TranslatorConfig(iterations=200, hidden=[32, 32], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
+                           log_every=50, select_every=50, batch_size=32)
+    tr, stats = translation.train_translator(train, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
+                                             held_out=held)
+    losses = [c["heldout/selection_loss"] for c in stats["curve"] if "heldout/selection_loss" in c]
+    assert len(losses) == 4 and stats["selected_heldout_loss"] == pytest.approx(min(losses))
+    assert stats["selected_iteration"] == 50 * (1 + int(np.argmin(losses)))
+
+
+def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
+                           lambda_hand=1.0, log_every=100, batch_size=32)
+    _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
+    assert stats["curve"][-1]["loss/hand"] < 0.5 * stats["curve"][0]["loss/hand"]
+
+
+def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    tr = translation.Translator([16])
+    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
+    x0, x, x2, pidx = translation._normalised(tr, random_x)
+    full = translation._Losses(tr, dyn, TranslatorConfig(), layout.BOX_PUSH)(x0, x, x2, pidx)
+    none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), layout.BOX_PUSH)(x0, x, x2, pidx)
+    obj = full["dyn_sq"][:, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[1]
+    assert float(none["dyn"]) == pytest.approx(float(full["dyn"] - obj), rel=1e-4)

@@ -78,8 +78,9 @@ def train(task: str, p: TwinParams, models_dir: str | Path, root: str | Path = "
     demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl) for pr in layout.PAIRINGS}
     random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl) for pr in layout.PAIRINGS}
     cfg = translation.method_config("lfdt", p.translator)
-    tr, tstats = translation.train_translator(demos, random_x, ry.y, dyn, cfg, seed=p.seed,
-                                              std_floor=p.dynamics.std_floor, log=log, tl=tl)
+    train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, p.seed)
+    tr, tstats = translation.train_translator(train_demos, random_x, ry.y, dyn, cfg, seed=p.seed,
+                                              std_floor=p.dynamics.std_floor, log=log, tl=tl, held_out=held)
     save_state(tr, models_dir / "translator.pt", {"translator": cfg.model_dump(), "task": task})
     dt = twin.TwinConfig().control_dt
     translated = translation.translate_demos(tr, dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
