@@ -23,21 +23,22 @@ import torch
 import torch.nn.functional as nnf
 
 from lfdt import bc, layout, translation
-from lfdt.config import BCConfig, TranslatorConfig
+from lfdt.config import BCConfig, EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.nets import mlp
 
 
 def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> translation.Transitions:
     x = rng.normal(size=(n, dim)).astype(np.float32)
-    return translation.Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20)
+    return translation.Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
 
 
 def ours_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels, rng) -> float:
     demos = {p: fake_transitions(2_000, 21, rng) for p in layout.PAIRINGS}
     rand = {p: fake_transitions(20_000, 21, rng) for p in layout.PAIRINGS}
     y = rng.normal(size=(20_000, 19)).astype(np.float32)
-    _, st = translation.train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0)
+    _, st = translation.train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0,
+                                         kinematics=translation.Kinematics.of_box_push(EnvConfig()))
     return st["iterations_per_s"]
 
 
@@ -48,9 +49,11 @@ def bare_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels) -> f
     opt_d = torch.optim.Adam(d.parameters(), lr=cfg.learning_rate)
     b = cfg.batch_size
     x, x2, y = torch.randn(b, 23), torch.randn(b, 23), torch.randn(b, 19)
+    x0 = torch.randn(b, 23)
     t0 = time.perf_counter()
     for _ in range(iters):
-        yh, yh2 = g(x), g(x2)
+        # one pass of G over (x_prev, x, x2), as the translator with Y's kinematics does
+        _, yh, yh2 = g(torch.cat([x0, x, x2])).split(b)
         dr, df = d(y), d(yh.detach())
         ld = nnf.binary_cross_entropy_with_logits(dr, torch.ones_like(dr)) + \
             nnf.binary_cross_entropy_with_logits(df, torch.zeros_like(df))

@@ -167,3 +167,13 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
                    "train_transitions": int(train.sum()), "val_transitions": int(val.sum()),
                    "wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve})
     return models.eval(), result
+
+
+def load_models(path) -> DynamicsModels:
+    """F and F^-1 saved by the fit_dynamics stage (``dynamics.pt`` with its JSON config), in eval mode."""
+    from lfdt.nets import load_state, read_config
+
+    cfg = read_config(path)
+    n_y = len(cfg.get("state_columns") or layout.state_columns("Y"))
+    n_a = len(cfg.get("action_columns") or layout.action_columns("Y"))
+    return load_state(DynamicsModels(n_y, n_a, cfg["dynamics"]["hidden"]), path)

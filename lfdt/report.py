@@ -59,7 +59,8 @@ def aggregate(trials: pd.DataFrame) -> pd.DataFrame:
         first = mat[:, :PAPER_TRIALS]
         lo20, hi20 = seed_state_interval(first)
         paper = methods.get(m).paper.get(int(d))
-        out.append({"method": m, "demos": int(d), "seeds": len(seeds), "trials_per_seed": mat.shape[1],
+        out.append({"method": m, "demos": int(d), "start_states": ",".join(sorted(set(g.start_states))),
+                    "seeds": len(seeds), "trials_per_seed": mat.shape[1],
                     "trials": int(mat.size), "successes": int(mat.sum()), "success_rate": float(mat.mean()),
                     "per_seed": ";".join(f"{r:.3f}" for r in mat.mean(axis=1)), "ci95_low": lo, "ci95_high": hi,
                     f"success_rate_first{PAPER_TRIALS}": float(first.mean()), f"first{PAPER_TRIALS}_ci95_low": lo20,
@@ -94,12 +95,14 @@ def markdown(table: pd.DataFrame) -> str:
         lines.append(f"| {methods.get(m).title} | " + " | ".join(cells) + " |")
     n_seeds = int(table.seeds.max())
     per_seed = int(table.trials_per_seed.max())
+    block = "" if "start_states" not in table or set(table.start_states) == {"evaluation"} else \
+        " **Development start states** (not the evaluation block): for choosing settings, not for reporting."
     lines += ["", f"Success rate over {per_seed} start states per seed (the same states for every row), mean over "
               f"{n_seeds} seed(s) (n = {n_seeds * per_seed} trials per cell); in brackets the per-seed rates in % and "
               "a 95 % interval that counts both the seeds and the start states as random (two-way random effects, "
               f"t with Satterthwaite's degrees of freedom). 'First {PAPER_TRIALS}': the paper's protocol "
               f"({PAPER_TRIALS} trials per seed), on the first start states of the same list. "
-              "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper."]
+              "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper." + block]
     return "\n".join(lines) + "\n"
 
 

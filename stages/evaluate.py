@@ -3,13 +3,15 @@ evaluation start states."""
 
 from pathlib import Path
 
-from lfdt import jobs, methods, parallel, stage
+from lfdt import methods, parallel, stage
+from lfdt.jobs import common
+from lfdt.jobs.evaluate import evaluate_job
 
 
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.METHODS)
-    cfgs = jobs.configs(method, demos, p.grid.seeds, params_path)
-    results = parallel.run_jobs(jobs.evaluate_job, cfgs, p.grid.workers, total=p.evaluation.trials * len(cfgs),
+    cfgs = common.configs(method, demos, p.grid.seeds, params_path)
+    results = parallel.run_jobs(evaluate_job, cfgs, p.grid.workers, total=p.evaluation.trials * len(cfgs),
                                 desc=f"evaluate {cfgs[0].group}", unit="trial")
     out = Path("reports/eval")
     stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))

@@ -4,7 +4,8 @@ import argparse
 
 import pyarrow.parquet as pq
 
-from lfdt import data, jobs, layout, stage
+from lfdt import data, layout, stage
+from lfdt.jobs import common
 
 
 def run() -> None:
@@ -13,13 +14,13 @@ def run() -> None:
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = stage.params(args.params)
-    for cfg in jobs.configs("bc_no_translation", args.demos, p.grid.seeds, args.params):
+    for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, args.params):
         for pairing in layout.PAIRINGS:
-            path = jobs.DEMOS / f"{pairing}.parquet"
+            path = common.DEMOS / f"{pairing}.parquet"
             episodes = data.demo_subset(path, args.demos, cfg.seed, pairing)
             table = pq.read_table(path)
             keep = data.read_transitions(path, columns=["episode_index"]).episode_index.isin(episodes).to_numpy()
-            data.write_table(table.filter(keep), cfg.dir(jobs.BC_DATA) / f"raw_{pairing}.parquet")
+            data.write_table(table.filter(keep), cfg.dir(common.BC_DATA) / f"raw_{pairing}.parquet")
 
 
 if __name__ == "__main__":

@@ -2,14 +2,16 @@
 
 from pathlib import Path
 
-from lfdt import jobs, methods, parallel, stage
+from lfdt import methods, parallel, stage
+from lfdt.jobs import common
+from lfdt.jobs.bc import bc_job
 
 
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.METHODS)
-    cfgs = jobs.configs(method, demos, p.grid.seeds, params_path)
+    cfgs = common.configs(method, demos, p.grid.seeds, params_path)
     members = 2 if methods.get(method).data == "raw" else 1
-    results = parallel.run_jobs(jobs.bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
+    results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
                                 desc=f"BC {cfgs[0].group}")
     out = Path("reports/bc")
     stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))

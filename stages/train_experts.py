@@ -2,7 +2,8 @@
 
 import argparse
 
-from lfdt import jobs, layout, parallel, stage
+from lfdt import layout, parallel, stage
+from lfdt.jobs.experts import expert_job
 
 
 def run() -> None:
@@ -10,7 +11,7 @@ def run() -> None:
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = stage.params(args.params)
-    results = parallel.run_jobs(jobs.expert_job, [(pr, args.params) for pr in layout.PAIRINGS], p.grid.workers,
+    results = parallel.run_jobs(expert_job, [(pr, args.params) for pr in layout.PAIRINGS], p.grid.workers,
                                 total=p.experts.total_timesteps * len(layout.PAIRINGS), desc="SAC experts",
                                 unit="step")
     for r in results:

@@ -3,14 +3,16 @@ translate the demonstrations."""
 
 from pathlib import Path
 
-from lfdt import jobs, methods, parallel, stage, translation
+from lfdt import methods, parallel, stage, translation
+from lfdt.jobs import common
+from lfdt.jobs.translator import translator_job
 
 
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.translator_methods())
-    cfgs = jobs.configs(method, demos, p.grid.seeds, params_path)
+    cfgs = common.configs(method, demos, p.grid.seeds, params_path)
     iters = translation.method_config(method, p.translator).iterations
-    results = parallel.run_jobs(jobs.translator_job, cfgs, p.grid.workers, total=iters * len(cfgs),
+    results = parallel.run_jobs(translator_job, cfgs, p.grid.workers, total=iters * len(cfgs),
                                 desc=f"translator {cfgs[0].group}")
     out = Path("reports/translator")
     stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))

@@ -1,0 +1,1 @@
+"""Per-configuration jobs of the matrix stages (one module per kind of job)."""

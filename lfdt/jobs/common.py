@@ -1,0 +1,65 @@
+"""What every per-configuration job of the matrix stages shares: the configuration, its directories, F and F^-1.
+
+A matrix stage (``stages/train_translator.py``, ``track_demos``, ``train_bc``, ``evaluate``) covers one method
+and one demonstration count; its seeds are independent jobs that :func:`lfdt.parallel.run_jobs` runs side by
+side. Each job opens its own MLflow run, writes its own files under ``<root>/<method>-d<demos>/s<seed>/`` and
+returns its metrics; the stage gathers them into one report per (method, demos). Each kind of job lives in its
+own module of this package, importing only what it needs, so that a change to one stage's code reruns only
+that stage.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from lfdt import methods, stage
+
+DEMOS = Path("data/demos")
+RANDOM = Path("data/random")
+DYNAMICS = Path("models/dynamics/dynamics.pt")
+TRANSLATORS = Path("models/translator")
+BC_DATA = Path("data/bc_train")
+POLICIES = Path("models/bc")
+VIDEOS = Path("reports/videos")
+
+DATA_FILE = {"raw": None, "translated": "translated.parquet", "executed": "executed.parquet"}
+"""The BC training file each kind of method (:attr:`lfdt.methods.Method.data`) writes and reads."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration of a matrix stage."""
+
+    method: str
+    demos: int
+    seed: int
+    params: str = "params.yaml"
+
+    @property
+    def group(self) -> str:
+        """The (method, demos) a matrix stage instance covers, as in file names: ``lfdt-d50``."""
+        return f"{self.method}-d{self.demos}"
+
+    @property
+    def name(self) -> str:
+        """This configuration in run names: ``lfdt-d50-s0``."""
+        return stage.config_name(self.method, self.demos, self.seed)
+
+    def dir(self, root: Path) -> Path:
+        """Its own directory under ``root``: ``<root>/<method>-d<demos>/s<seed>``."""
+        return Path(root) / self.group / f"s{self.seed}"
+
+    def tags(self) -> dict:
+        return {"method": self.method, "demos": self.demos, "seed": self.seed, "config": self.name}
+
+
+def configs(method: str, demos: int, seeds: list[int], params: str) -> list[Config]:
+    """The jobs of one matrix stage instance."""
+    methods.get(method)
+    return [Config(method, demos, s, params) for s in seeds]
+
+
+def numeric(d: dict) -> dict:
+    """The int and float entries of a metrics dict (what MLflow takes as metrics)."""
+    return {k: v for k, v in d.items() if isinstance(v, int | float) and not isinstance(v, bool)}

@@ -1,0 +1,45 @@
+"""The expert job: train (or resume) the SAC expert of one pairing (the first half of the pipeline)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from lfdt import experts, stage, tracking
+from lfdt.jobs.common import numeric
+from lfdt.parallel import Progress
+
+EXPERTS = Path("models/experts")
+EXPERT_CHECKPOINTS = Path("checkpoints/experts")
+EXPERT_REPORTS = Path("reports/experts")
+
+
+def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
+    """Train (or resume) the SAC expert of one pairing, evaluate it on fresh seeds, save it: ``job`` is
+    (pairing, params path)."""
+    pairing, params_path = job
+    t0 = time.perf_counter()
+    p = stage.params(params_path)
+    cfg, env_cfg, demos_cfg = p.experts, p.env, p.demos
+    out = EXPERTS / pairing
+    with tracking.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
+                                              **experts.protocol_doc(demos_cfg)},
+                            tags={"pairing": pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
+                            run_name=f"train_experts-{pairing}") as run:
+        model, stats = experts.train_expert(pairing, env_cfg, cfg, demos_cfg, EXPERT_CHECKPOINTS / pairing,
+                                            log=run.metrics, progress=progress)
+        ev = experts.evaluate_expert(model, pairing, env_cfg, demos_cfg, cfg.eval_episodes, cfg.seed)
+        curve = stats.pop("curve")
+        summary = {"pairing": pairing, "protocol": demos_cfg.protocol, **ev, **stats,
+                   "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
+        experts.save_expert(model, out, pairing, env_cfg, cfg, demos_cfg, {"evaluation": ev, "training": stats})
+        stage.write_json(EXPERT_REPORTS / f"{pairing}_train.json", summary)
+        stage.write_csv(EXPERT_REPORTS / f"{pairing}_curve.csv",
+                        [{"timesteps": c["timesteps"], "success_rate": c["train/success_rate_last100"],
+                          "episode_return": c["train/episode_return_last100"]} for c in curve])
+        run.metrics({f"eval/{k}": v for k, v in numeric(ev).items()})
+        run.metrics(numeric(stats))
+        run.artifact(out / "config.json")
+        run.artifact(EXPERT_REPORTS / f"{pairing}_curve.csv")
+        experts.Checkpoints(EXPERT_CHECKPOINTS / pairing, "").clear()
+    return summary

@@ -1,0 +1,58 @@
+"""The translator job: train G and D of one configuration, translate its demonstrations, measure them."""
+
+from __future__ import annotations
+
+import time
+
+import torch
+
+from lfdt import data, layout, stage, tracking, translation
+from lfdt.dynamics import load_models, load_random_y
+from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TRANSLATORS, Config, numeric
+from lfdt.nets import save_state
+from lfdt.parallel import Progress
+
+
+def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
+    """Train the translator of one configuration, translate its demonstrations, measure the translation."""
+    t0 = time.perf_counter()
+    p = stage.params(cfg.params)
+    tcfg = translation.method_config(cfg.method, p.translator)
+    torch.set_num_threads(tcfg.torch_threads)
+    kin = translation.Kinematics.of_box_push(p.env)
+    dyn = load_models(DYNAMICS)
+    demo_paths = {pr: DEMOS / f"{pr}.parquet" for pr in layout.PAIRINGS}
+    episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
+    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], with_actions=True)
+                 for pr in layout.PAIRINGS}
+    demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
+    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr) for pr in layout.PAIRINGS}
+    y_random = load_random_y(RANDOM / "Y.parquet").y
+    with tracking.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
+                            run_name=f"train_translator-{cfg.name}") as run:
+        tr, stats = translation.train_translator(demos, random_x, y_random, dyn, tcfg, seed=cfg.seed,
+                                                 std_floor=p.dynamics.std_floor, log=run.metrics,
+                                                 progress=progress, kinematics=kin, held_out=held)
+        save_state(tr, cfg.dir(TRANSLATORS) / "translator.pt", {
+            **cfg.tags(), "translator": tcfg.model_dump(),
+            "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},
+            "y_columns": layout.state_columns("Y"), "episodes": episodes,
+            "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
+        df = translation.translate_demos(tr, dyn, demo_paths, episodes, tcfg, p.env.timestep * p.env.frame_skip)
+        table = translation.translated_table(df, {
+            "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
+            "source_episodes": episodes, "layout": layout.describe(),
+            "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
+                           f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"})
+        data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["translated"])
+        with torch.no_grad():
+            replay = translation.replay_check(df, p.env)
+            diag = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random,
+                                                      kinematics=kin, seed=cfg.seed)
+        diag.update(translation.translation_diagnostics(df, demo_paths, episodes))
+        curve = stats.pop("curve")
+        metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
+                   **stats, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
+                   "mlflow_run_id": run.run_id}
+        run.metrics(numeric(metrics))
+    return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}
