@@ -86,7 +86,8 @@ class SuccessConfig(Strict):
 
 
 class RewardConfig(Strict):
-    """Dense reward for the SAC experts: -w_box d_box - w_yaw |yaw| - w_contact sum d_ci - w_action |a|^2."""
+    """Dense reward for the SAC experts: -w_box d_box - w_yaw |yaw| - w_contact sum d_ci - w_action |a|^2
+    - w_action_rate |a - a_prev|^2."""
 
     w_box: NonNegFloat = 10.0
     """Weight of the box-to-goal distance, 1/m."""
@@ -97,6 +98,10 @@ class RewardConfig(Strict):
     hovered and poked, touching the box in 25-29 % of the frames; at 20 it pushes along, 62-67 %)."""
     w_action: NonNegFloat = 0.01
     """Weight of the squared action norm."""
+    w_action_rate: NonNegFloat = 1.0
+    """Weight of the squared change of the command from one control step to the next (a person moves smoothly:
+    without it the SAC human's commands changed by 0.22 per step on average, and its translated motion was hard to
+    clone)."""
     success_bonus: NonNegFloat = 10.0
     """Bonus on success (the episode then ends)."""
 
@@ -346,8 +351,9 @@ class TranslatorConfig(Strict):
     """Hidden layers of G and D ('3 fully connected layers' = 2 hidden + output)."""
     learning_rate: PosFloat = 3e-4
     """Adam learning rate of G and D."""
-    batch_size: Annotated[int, Field(ge=4)] = 32
-    """Minibatch: half demonstration transitions, half X random transitions, both pairings in each half."""
+    batch_size: Annotated[int, Field(ge=4)] = 128
+    """Minibatch: half demonstration transitions, half X random transitions, both pairings in each half (the paper:
+    32; 128 made translations that BC could use more often on the development start states: README)."""
     iterations: PosInt = 6_000
     """Gradient steps of G (and of D)."""
     object: Literal["translate", "correct", "copy"] = "copy"
@@ -460,7 +466,7 @@ class TwinParams(Strict):
     """Data, training and translator seed."""
     dynamics: DynamicsConfig = DynamicsConfig(batch_size=32, iterations=8_000, eval_every=1_000)
     """Dynamics models of the twin's domain Y."""
-    translator: TranslatorConfig = TranslatorConfig(iterations=4_000, kinematics="learned")
+    translator: TranslatorConfig = TranslatorConfig(iterations=4_000, kinematics="learned", batch_size=32)
     """Translator of the twin (the same loss; end positions instead of joint states)."""
     bc: BCConfig = BCConfig(iterations=4_000)
     """Behaviour cloning on the twin."""

@@ -331,6 +331,7 @@ class BoxPushEnv(gym.Env):
 
     def step(self, action):
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        da = a - self.data.ctrl  # the command held since the last step (zero after a reset)
         self.data.ctrl[:] = a
         mujoco.mj_step(self.model, self.data, nstep=self.cfg.frame_skip)
         self._steps += 1
@@ -338,7 +339,8 @@ class BoxPushEnv(gym.Env):
         info = self._info()
         r = self.cfg.reward
         reward = (-r.w_box * info["box_distance"] - r.w_yaw * abs(info["box_yaw"])
-                  - r.w_contact * sum(info["contact_distance"]) - r.w_action * float(a @ a))
+                  - r.w_contact * sum(info["contact_distance"]) - r.w_action * float(a @ a)
+                  - r.w_action_rate * float(da @ da))
         terminated = info["is_success"]
         if terminated:
             reward += r.success_bonus

@@ -177,3 +177,17 @@ def test_render_rgb_array():
     img = env.render()
     assert img.shape == (96, 96, 3) and img.dtype == np.uint8 and img.std() > 5
     env.close()
+
+
+def test_action_rate_penalty_is_the_change_of_command():
+    base = CFG.model_copy(update={"reward": CFG.reward.model_copy(update={"w_action_rate": 0.0})})
+    rated = CFG.model_copy(update={"reward": CFG.reward.model_copy(update={"w_action_rate": 2.0})})
+    a1, a2 = np.full(6, 0.3), np.r_[np.full(3, -0.2), np.full(3, 0.5)]
+    rewards = []
+    for cfg in (base, rated):
+        env = BoxPushEnv("Y", cfg)
+        env.reset(seed=4)
+        rewards.append([env.step(a1)[1], env.step(a2)[1]])
+    # the first command changes from rest (zero), the second from the first
+    assert rewards[0][0] - rewards[1][0] == pytest.approx(2.0 * float(a1 @ a1))
+    assert rewards[0][1] - rewards[1][1] == pytest.approx(2.0 * float((a2 - a1) @ (a2 - a1)))

@@ -30,6 +30,14 @@ def _dvc(args, cwd, timeout=600):
     return proc.stdout + proc.stderr
 
 
+def _merge(base: dict, over: dict) -> dict:
+    """params.yaml with the smoke values laid over it, section by section, at any depth."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
 @pytest.fixture(scope="module")
 def project(tmp_path_factory):
     """A copy of the project with the smoke params, after one full `dvc repro`."""
@@ -37,9 +45,8 @@ def project(tmp_path_factory):
     for name in ("dvc.yaml", "lfdt", "stages"):
         src = ROOT / name
         (shutil.copytree if src.is_dir() else shutil.copy)(src, dst / name)
-    params = yaml.safe_load((ROOT / "params.yaml").read_text())
-    for section, values in yaml.safe_load((ROOT / "tests/smoke_params.yaml").read_text()).items():
-        params[section].update(values)
+    params = _merge(yaml.safe_load((ROOT / "params.yaml").read_text()),
+                    yaml.safe_load((ROOT / "tests/smoke_params.yaml").read_text()))
     validate_params(params)
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     subprocess.run(["git", "init", "-q"], cwd=dst, check=True)

@@ -70,7 +70,7 @@ def test_identity_loss_pulls_the_real_robot_only(tiny):
     env, paths, dyn = tiny
     random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
-                           log_every=100, batch_size=32)
+                           log_every=100, batch_size=32, kinematics="learned")
     tr, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
     assert [c["iteration"] for c in stats["curve"]] == [100, 200, 300]
     assert stats["curve"][-1]["loss/id"] < 0.5 * stats["curve"][0]["loss/id"]
@@ -126,7 +126,7 @@ def test_held_out_split_and_checkpoint_selection(tiny):
         assert len(train[p].x) + len(held[p].x) == len(random_x[p].x) and len(held[p].x) > 0
     assert translation.split_held_out(random_x, 0.0, seed=0)[1] is None
     cfg = TranslatorConfig(iterations=200, hidden=[32, 32], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
-                           log_every=50, select_every=50, batch_size=32)
+                           log_every=50, select_every=50, batch_size=32, kinematics="learned")
     tr, stats = translation.train_translator(train, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
                                              held_out=held)
     losses = [c["heldout/selection_loss"] for c in stats["curve"] if "heldout/selection_loss" in c]
@@ -138,7 +138,7 @@ def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
     env, paths, dyn = tiny
     random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
-                           lambda_hand=1.0, log_every=100, batch_size=32)
+                           lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
     _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
     assert stats["curve"][-1]["loss/hand"] < 0.5 * stats["curve"][0]["loss/hand"]
 
@@ -153,3 +153,11 @@ def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), layout.BOX_PUSH)(x0, x, x2, pidx)
     obj = full["dyn_sq"][:, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[1]
     assert float(none["dyn"]) == pytest.approx(float(full["dyn"] - obj), rel=1e-4)
+
+
+def test_forward_kinematics_needs_a_robot_model(tiny):
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    with pytest.raises(ValueError, match="needs the arms' kinematics"):
+        translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
+                                     TranslatorConfig(iterations=2), seed=0)
