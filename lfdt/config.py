@@ -471,6 +471,13 @@ class TwinParams(Strict):
     bc: BCConfig = BCConfig(iterations=4_000)
     """Behaviour cloning on the twin."""
 
+    @model_validator(mode="after")
+    def _learned_kinematics(self) -> TwinParams:
+        if self.translator.kinematics != "learned":
+            raise ValueError(f"translator.kinematics = {self.translator.kinematics!r}: the twin's states are end "
+                             "positions with no joint angles, so G must output them ('learned')")
+        return self
+
 
 class Params(Strict):
     """The whole params.yaml."""

@@ -82,7 +82,7 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
     params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
               "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]}}
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
-    cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--pairing", "R1H"]
+    cmd = [sys.executable, str(ROOT / "stages/train_experts.py")]  # both pairings, side by side
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path / 'mlflow.db'}"}
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
@@ -102,6 +102,8 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "reports/experts/R1H_train.json").read_text())
     assert report["resumed_from_timesteps"] == stopped_at
-    assert report["timesteps"] == 3_000
-    assert (tmp_path / "models/experts/R1H/policy.pt").exists()
-    assert not (tmp_path / "checkpoints/experts/R1H").exists()  # cleaned up once the model is safe
+    for pairing in ("R1H", "HR2"):
+        report = json.loads((tmp_path / f"reports/experts/{pairing}_train.json").read_text())
+        assert report["timesteps"] == 3_000
+        assert (tmp_path / f"models/experts/{pairing}/policy.pt").exists()
+        assert not (tmp_path / f"checkpoints/experts/{pairing}").exists()  # cleaned up once the model is safe

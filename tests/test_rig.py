@@ -207,7 +207,7 @@ def tiny_models(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("twin")
     p = TwinParams(random_samples=120, random_episode_steps=20, demos_per_pairing=2, trials=2, videos=0,
                    dynamics=DynamicsConfig(hidden=[32, 32], iterations=30, eval_every=10),
-                   translator=TranslatorConfig(hidden=[32, 32], iterations=20, log_every=10),
+                   translator=TranslatorConfig(hidden=[32, 32], iterations=20, log_every=10, kinematics="learned"),
                    bc=BCConfig(hidden=[32, 32], iterations=20, eval_every=10))
     twin_pipeline.collect("block_push", p, root=root / "data")
     twin_pipeline.train("block_push", p, root / "models", root=root / "data")
