@@ -157,6 +157,62 @@ def plot(run_rows: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
     return path
 
 
+CURVE_PANELS = {"loss/dyn": "L_dyn (training batch)", "heldout/selection_loss": "held-out translation loss",
+                "D/accuracy": "D's accuracy (training batch)", "loss/adv": "L_adv of G"}
+"""The translator's learning-curve columns plotted by :func:`plot_translator_curves`, with their titles."""
+
+
+def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
+    """Translator learning curves from reports/translator/*_curve.csv: one panel per CURVE_PANELS column, one
+    colour per method, one line style per demo count, each the mean over seeds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def key(f: Path) -> tuple[int, int]:
+        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
+        return METHOD_ORDER.index(method), int(demos)
+
+    files = sorted(Path(translator_dir).glob("*_curve.csv"), key=key)
+    if not files:
+        raise FileNotFoundError(f"no translator learning curves (*_curve.csv) in {translator_dir}")
+    styles = ["-", "--", ":", "-."]
+    fig, axes = plt.subplots(2, 2, figsize=(12, 6.4), dpi=110, sharex=True)
+    demo_counts: list[int] = []
+    for f in files:
+        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
+        if int(demos) not in demo_counts:
+            demo_counts.append(int(demos))
+    demo_counts.sort()
+    for f in files:
+        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
+        curve = pd.read_csv(f)
+        meth = methods.get(method)
+        for ax, (col, title) in zip(axes.flat, CURVE_PANELS.items()):
+            if col not in curve:
+                continue
+            mean = curve.dropna(subset=[col]).groupby("iteration")[col].mean()
+            ax.plot(mean.index, mean.to_numpy(), styles[demo_counts.index(int(demos)) % len(styles)],
+                    color=meth.colour, lw=1, label=f"{meth.title}, {demos} demos")
+            ax.set_title(title, fontsize=9)
+    for ax in axes.flat:
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("iteration")
+    axes[0, 0].set_yscale("log")
+    axes[0, 1].set_yscale("log")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="center left", bbox_to_anchor=(0.77, 0.5))
+    fig.suptitle("Translator learning curves (mean over seeds; the kept checkpoint is the held-out minimum)",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0, 0.77, 1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 DIAGNOSTICS = {
     "selected_iteration": "iteration kept (lowest held-out translation loss)",
     "selected_heldout_loss": "held-out translation loss there",

@@ -30,6 +30,7 @@ def run() -> None:
     stage.write_csv(reports / "success_vs_demos.csv", run_rows[["method", "demos", "seed", "success_rate"]]
                     .to_dict("records"))
     png = report.plot(run_rows, table, reports / "success_vs_demos.png")
+    curves_png = report.plot_translator_curves(reports / "translator", reports / "translator_curves.png")
     diag = report.translator_diagnostics(reports / "translator", reports / "track")
     stage.write_csv(reports / "translator_diagnostics.csv", diag.to_dict("records"))
     times = report.stage_times(reports)
@@ -55,6 +56,7 @@ def run() -> None:
                   "stage_times.csv"):
             parent.artifact(reports / f)
         parent.artifact(png)
+        parent.artifact(curves_png)
         adopted = tracking.adopt_children(parent.run_id, children)
         summary["mlflow_parent_run_id"] = parent.run_id
         summary["mlflow_child_runs"] = adopted

@@ -1,5 +1,6 @@
 """The whole DVC DAG on tiny params: every stage runs, every artifact has its schema, reruns are incremental."""
 
+import csv
 import json
 import os
 import shutil
@@ -113,6 +114,11 @@ def test_second_half_artifacts(project):
     for m in TRANSLATORS:
         tr = json.loads((dst / f"reports/translator/{m}-d3.json").read_text())
         assert set(tr["seeds"]) == {str(s) for s in SEEDS}
+        # held-out losses (every select_every) and diagnostics (every log_every) share one column set
+        with open(dst / f"reports/translator/{m}-d3_curve.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        assert {"loss/dyn", "heldout/selection_loss"} <= set(rows[0])
+        assert {r["iteration"] for r in rows if r["heldout/selection_loss"]} == {"30", "60"}
         for seed in SEEDS:
             path = dst / f"data/bc_train/{m}-d3/s{seed}/translated.parquet"
             meta = data.read_metadata(path)
@@ -154,6 +160,7 @@ def test_second_half_artifacts(project):
     assert "LfDT" in md and "paper" in md and "first 20" in md
     assert (dst / "reports/table1.tex").read_text().startswith("\\begin{tabular}")
     assert (dst / "reports/success_vs_demos.png").stat().st_size > 5000
+    assert (dst / "reports/translator_curves.png").stat().st_size > 5000
     assert (dst / "reports/translator_diagnostics.csv").read_text().startswith("method,demos,seeds")
     rep = json.loads((dst / "reports/report.json").read_text())
     per_seed = len(TRANSLATORS) + 1 + 2 * len(METHODS)  # translators, re-execution, BC and evaluation
