@@ -28,6 +28,7 @@ import argparse
 import math
 import os
 import select
+import signal
 import socket
 import struct
 import sys
@@ -382,6 +383,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     def show(record: ReceivedCommand) -> None:
         print(f"received: {record.describe()}", flush=True)
 
+    # a shell without job control starts background commands with SIGINT ignored, and Python then never raises
+    # KeyboardInterrupt: Ctrl-C (or `kill -INT`) must stop the fake however it was started
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     fake = FakeMyCobot("pty" if args.pty else "tcp", angles=args.angles, silent=args.silent,
                        port=args.tcp or 0, on_command=None if args.quiet else show)
     with fake:
