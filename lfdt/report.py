@@ -170,30 +170,23 @@ def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    def key(f: Path) -> tuple[int, int]:
+    curves = []
+    for f in Path(translator_dir).glob("*_curve.csv"):
         method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
-        return METHOD_ORDER.index(method), int(demos)
-
-    files = sorted(Path(translator_dir).glob("*_curve.csv"), key=key)
-    if not files:
+        curves.append((METHOD_ORDER.index(method), int(demos), method, f))
+    if not curves:
         raise FileNotFoundError(f"no translator learning curves (*_curve.csv) in {translator_dir}")
     styles = ["-", "--", ":", "-."]
     fig, axes = plt.subplots(2, 2, figsize=(12, 6.4), dpi=110, sharex=True)
-    demo_counts: list[int] = []
-    for f in files:
-        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
-        if int(demos) not in demo_counts:
-            demo_counts.append(int(demos))
-    demo_counts.sort()
-    for f in files:
-        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
+    demo_counts = sorted({d for _, d, _, _ in curves})
+    for _, demos, method, f in sorted(curves):
         curve = pd.read_csv(f)
         meth = methods.get(method)
         for ax, (col, title) in zip(axes.flat, CURVE_PANELS.items()):
             if col not in curve:
                 continue
             mean = curve.dropna(subset=[col]).groupby("iteration")[col].mean()
-            ax.plot(mean.index, mean.to_numpy(), styles[demo_counts.index(int(demos)) % len(styles)],
+            ax.plot(mean.index, mean.to_numpy(), styles[demo_counts.index(demos) % len(styles)],
                     color=meth.colour, lw=1, label=f"{meth.title}, {demos} demos")
             ax.set_title(title, fontsize=9)
     for ax in axes.flat:
