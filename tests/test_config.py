@@ -24,6 +24,17 @@ def test_rendered_defaults_validate():
     validate_params(yaml.safe_load(render_defaults()))
 
 
+def test_params_yaml_is_what_the_schema_renders():
+    """Values and comments of params.yaml come from lfdt/config.py alone, so neither can drift from the other."""
+    rendered = render_defaults() + "\n"
+    text = (ROOT / "params.yaml").read_text()
+    diff = [f"line {i + 1}: params.yaml {a!r} vs schema {b!r}"
+            for i, (a, b) in enumerate(zip(text.splitlines(), rendered.splitlines())) if a != b]
+    assert text == rendered, (
+        "params.yaml differs from what lfdt/config.py renders (regenerate it with `python -c \"from lfdt.config "
+        f"import render_defaults; print(render_defaults())\" > params.yaml`): {diff[:3] or 'line count differs'}")
+
+
 @pytest.mark.parametrize("raw, key, value", [
     ({"experts": {"total_timesteps": -5}}, "experts.total_timesteps", "-5"),
     ({"random": {"transitions": 0}}, "random.transitions", "0"),

@@ -99,3 +99,25 @@ def test_closure_follows_imports_transitively():
     # stages/train_translator.py imports lfdt.translation, which imports lfdt.dynamics and lfdt.envs
     files = {f.relative_to(ROOT).as_posix() for f in closure(ROOT / "stages/train_translator.py")}
     assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/envs.py", "lfdt/config.py"} <= files
+
+
+def test_lock_holds_only_stages_dvc_yaml_defines():
+    """DVC keeps the lock entries of removed stages (treeverse/dvc#5293); they slow every status and repro."""
+    from lfdt.lockfile import defined_stages, stale_stages
+
+    lock = yaml.safe_load((ROOT / "dvc.lock").read_text())
+    stale = stale_stages(lock, defined_stages(ROOT))
+    assert not stale, f"dvc.lock holds {len(stale)} stages dvc.yaml does not define, e.g. {stale[:3]}: " \
+                      "run `python -m lfdt.lockfile --prune`"
+
+
+def test_prune_removes_only_stale_entries(tmp_path):
+    from lfdt.lockfile import prune
+
+    lock = tmp_path / "dvc.lock"
+    lock.write_text((ROOT / "dvc.lock").read_text().replace(
+        "stages:\n", "stages:\n  gone@1:\n    cmd: python stages/gone.py\n", 1))
+    defined = set(yaml.safe_load((ROOT / "dvc.lock").read_text())["stages"])
+    assert prune(lock, defined) == ["gone@1"]
+    assert lock.read_text() == (ROOT / "dvc.lock").read_text()
+    assert prune(lock, defined) == []
