@@ -307,8 +307,9 @@ class GridConfig(Strict):
     translator's demonstrations re-executed in Y)."""
     demos: list[PosInt] = Field(default=[50, 100, 200], min_length=1)
     """Demonstrations per pairing given to translation and BC (a subset drawn per seed)."""
-    seeds: list[Annotated[int, Field(ge=0, le=9)]] = Field(default=[0, 1, 2], min_length=1)
-    """Training seeds (translator, BC, demo subset)."""
+    seeds: list[Annotated[int, Field(ge=0, le=9)]] = Field(default=[3, 4, 5], min_length=1)
+    """Training seeds (translator, BC, demo subset). Not 0-2: the defaults were chosen on those (README, development
+    log), so a table on them flatters the method."""
     workers: Annotated[int, Field(ge=1, le=64)] = 2
     """Processes a matrix stage runs its seeds in, side by side (2 uses both cores of a laptop-class CPU)."""
 
@@ -364,8 +365,9 @@ class TranslatorConfig(Strict):
     """What of y_hat G outputs for the robots. 'learned' (the paper): every column. 'forward': Y's arm model is
     known, so G outputs joint angles; a translated arm's end position is the forward kinematics of its joint angles
     and its joint velocity the change of its joint angles over the control step (zero at an episode's start). On
-    the development start states this lifted LfDT from 4-7 % to 47-77 % (README); tasks whose states hold no
-    joints (the twin) need 'learned'."""
+    the development start states, with the default demonstrations and translator seeds 0 and 1, BC on 'learned'
+    translations succeeded 0.8-1.7 %, on 'forward' ones 67-91 % (README, development log steps 12-13; other
+    translator seeds do worse, steps 15-22); tasks whose states hold no joints (the twin) need 'learned'."""
     hand_skip: bool = False
     """G outputs the missing robot's end position as a correction added to the human's hand position (both are
     positions in the same world frame, as in the paper's real-robot state)."""
@@ -458,12 +460,14 @@ class TwinParams(Strict):
     """A random target is held for 1..random_hold_max control steps."""
     demos_per_pairing: PosInt = 10
     """Successful demonstrations per pairing (the paper: 10 + 10)."""
-    trials: PosInt = 10
-    """Evaluation trials per task and method (the paper: 10)."""
+    trials: PosInt = 50
+    """Evaluation trials per task, method and seed, from the same start states (the paper: 10 real trials, too few
+    to tell 80 % from 100 %)."""
     videos: Annotated[int, Field(ge=0)] = 1
     """Rollout videos per task and method."""
-    seed: Annotated[int, Field(ge=0, le=9)] = 0
-    """Data, training and translator seed."""
+    seeds: list[Annotated[int, Field(ge=0, le=9)]] = Field(default=[3, 4, 5], min_length=1)
+    """Seeds of the twin's data, dynamics, translator and BC, one whole run each (backend 'real': the robots'
+    recordings are one set, so the seeds differ only in training). Not 0-2, the seeds of development runs."""
     dynamics: DynamicsConfig = DynamicsConfig(batch_size=32, iterations=8_000, eval_every=1_000)
     """Dynamics models of the twin's domain Y."""
     translator: TranslatorConfig = TranslatorConfig(iterations=4_000, kinematics="learned", batch_size=32)
@@ -473,6 +477,8 @@ class TwinParams(Strict):
 
     @model_validator(mode="after")
     def _learned_kinematics(self) -> TwinParams:
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds has duplicates: {self.seeds}")
         if self.translator.kinematics != "learned":
             raise ValueError(f"translator.kinematics = {self.translator.kinematics!r}: the twin's states are end "
                              "positions with no joint angles, so G must output them ('learned')")

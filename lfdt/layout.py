@@ -69,15 +69,6 @@ def groups(domain: str) -> dict[str, list[str]]:
     return {"x^H": arm_columns("h"), f"x^R{ri[1]}": arm_columns(ri), "x^O": list(OBJECT_COLUMNS)}
 
 
-def indices(domain: str, columns: list[str]) -> list[int]:
-    """Positions of named state columns in a domain's observation vector."""
-    cols = state_columns(domain)
-    missing = [c for c in columns if c not in cols]
-    if missing:
-        raise KeyError(f"columns {missing} are not in domain {domain}'s state {cols}")
-    return [cols.index(c) for c in columns]
-
-
 def describe() -> dict:
     """The whole layout as a JSON-serialisable dict (stored in every Parquet file's metadata)."""
     return {

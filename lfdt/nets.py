@@ -45,9 +45,6 @@ class Normalizer(nn.Module):
     def to_dict(self) -> dict:
         return {"mean": self.mean.tolist(), "std": self.std.tolist(), "names": self.names}
 
-    @classmethod
-    def from_dict(cls, d: dict) -> Normalizer:
-        return cls(np.asarray(d["mean"]), np.asarray(d["std"]), d.get("names"))
 
 
 def save_state(module: nn.Module, path: str | Path, config: dict) -> None:

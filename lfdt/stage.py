@@ -40,14 +40,16 @@ def write_json(path: str | Path, obj: Any) -> Path:
 
 
 def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
-    """Write a list of dicts as CSV atomically (DVC plots)."""
+    """Write a list of dicts as CSV atomically (DVC plots). The columns are the union of the rows' keys in the order
+    they first appear; a row without a column leaves its cell empty (e.g. a curve's rows logged at different
+    intervals)."""
     rows = list(rows)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     with open(tmp, "w", newline="") as fh:
         if rows:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+            w = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)), restval="")
             w.writeheader()
             w.writerows(rows)
     os.replace(tmp, path)

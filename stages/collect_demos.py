@@ -3,7 +3,7 @@
 import argparse
 from pathlib import Path
 
-from lfdt import data, experts, layout, stage, tracking
+from lfdt import data, experts, layout, mlflow_runs, stage
 
 
 def run() -> None:
@@ -21,7 +21,7 @@ def run() -> None:
         raise SystemExit(f"error: models/experts/{args.pairing} was trained for another demonstration protocol or "
                          f"robot program than params.yaml's demos.protocol / demos.program; rerun train_experts")
     out = Path("data/demos") / f"{args.pairing}.parquet"
-    with tracking.stage_run("collect_demos", {"env": p.env.model_dump(), "demos": cfg.model_dump()},
+    with mlflow_runs.stage_run("collect_demos", {"env": p.env.model_dump(), "demos": cfg.model_dump()},
                             tags={"pairing": args.pairing, "seed": cfg.seed, "protocol": cfg.protocol},
                             run_name=f"collect_demos-{args.pairing}") as run:
         with stage.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:

@@ -3,7 +3,7 @@
 import argparse
 from pathlib import Path
 
-from lfdt import data, layout, random_motion, stage, tracking
+from lfdt import data, layout, mlflow_runs, random_motion, stage
 
 
 def run() -> None:
@@ -14,7 +14,7 @@ def run() -> None:
     p = stage.params(args.params)
     cfg = p.random
     out = Path("data/random") / f"{args.domain}.parquet"
-    with tracking.stage_run("collect_random", {"env": p.env.model_dump(), "random": cfg.model_dump()},
+    with mlflow_runs.stage_run("collect_random", {"env": p.env.model_dump(), "random": cfg.model_dump()},
                             tags={"domain": args.domain, "seed": cfg.seed},
                             run_name=f"collect_random-{args.domain}") as run:
         with stage.progress(cfg.transitions, f"random {args.domain}", "tr") as bar:

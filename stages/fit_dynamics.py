@@ -3,7 +3,7 @@
 import argparse
 from pathlib import Path
 
-from lfdt import dynamics, layout, stage, tracking
+from lfdt import dynamics, layout, mlflow_runs, stage
 from lfdt.nets import save_state
 
 
@@ -13,7 +13,7 @@ def run() -> None:
     args = ap.parse_args()
     cfg = stage.params(args.params).dynamics
     d = dynamics.load_random_y("data/random/Y.parquet")
-    with tracking.stage_run("fit_dynamics", {"dynamics": cfg.model_dump()}, tags={"domain": "Y", "seed": cfg.seed},
+    with mlflow_runs.stage_run("fit_dynamics", {"dynamics": cfg.model_dump()}, tags={"domain": "Y", "seed": cfg.seed},
                             run_name="fit_dynamics") as run:
         with stage.progress(cfg.iterations, "F and F^-1", "it") as bar:
             models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: run.metrics(m, i), progress=bar)

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from lfdt import report, stage, tracking
+from lfdt import mlflow_runs, report, stage
 
 
 def run() -> None:
@@ -49,7 +49,7 @@ def run() -> None:
             for s in json.loads(f.read_text()).get("seeds", {}).values():
                 if s.get("mlflow_run_id"):
                     children.append(s["mlflow_run_id"])
-    with tracking.stage_run("report", {"grid": p.grid.model_dump()}, tags={"pipeline_parent": "true"},
+    with mlflow_runs.stage_run("report", {"grid": p.grid.model_dump()}, tags={"pipeline_parent": "true"},
                             run_name="pipeline") as parent:
         parent.metrics({k.replace("/", "_"): v for k, v in summary.items()})
         for f in ("table1.md", "table1.csv", "table1.tex", "table1_runs.csv", "translator_diagnostics.csv",
@@ -57,7 +57,7 @@ def run() -> None:
             parent.artifact(reports / f)
         parent.artifact(png)
         parent.artifact(curves_png)
-        adopted = tracking.adopt_children(parent.run_id, children)
+        adopted = mlflow_runs.adopt_children(parent.run_id, children)
         summary["mlflow_parent_run_id"] = parent.run_id
         summary["mlflow_child_runs"] = adopted
     stage.write_json(reports / "report.json", summary)

@@ -16,10 +16,8 @@ def run() -> None:
                                 desc=f"translator {cfgs[0].group}")
     out = Path("reports/translator")
     stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))
-    rows = [c for r in results for c in r["curve"]]
-    # held-out losses are measured every select_every iterations, diagnostics every log_every: one column set
-    columns = list(dict.fromkeys(k for c in rows for k in c))
-    stage.write_csv(out / f"{cfgs[0].group}_curve.csv", [{k: c.get(k, "") for k in columns} for c in rows])
+    # held-out losses are measured every select_every iterations, diagnostics every log_every
+    stage.write_csv(out / f"{cfgs[0].group}_curve.csv", [c for r in results for c in r["curve"]])
     for r in results:
         m = r["metrics"]
         print(f"{cfgs[0].group} seed {m['seed']}: held-out loss {m['selected_heldout_loss']:.3f} at iteration "

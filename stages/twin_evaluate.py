@@ -3,12 +3,12 @@
 import csv
 from pathlib import Path
 
-from lfdt import stage, tracking
+from lfdt import mlflow_runs, stage
 from lfdt.robot import twin, twin_pipeline
 
 
-def real_trials(task: str, real_dir: str) -> list[dict]:
-    """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots."""
+def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
+    """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots (of the policies of ``seed``)."""
     rows = []
     for method in twin_pipeline.METHODS:
         path = Path(real_dir) / task / f"deploy_{method}.csv"
@@ -16,7 +16,8 @@ def real_trials(task: str, real_dir: str) -> list[dict]:
             raise FileNotFoundError(f"backend 'real': no deployment log {path}; run `python -m lfdt.robot deploy "
                                     f"--task {task} --method {method} ...` on the robots")
         with open(path) as fh:
-            rows += [{"task": task, "method": method, "trial": int(r["trial"]), "success": r["success"] == "True"}
+            rows += [{"task": task, "method": method, "seed": seed, "trial": int(r["trial"]),
+                      "success": r["success"] == "True"}
                      for r in csv.DictReader(fh)]
     return rows
 
@@ -24,20 +25,22 @@ def real_trials(task: str, real_dir: str) -> list[dict]:
 def run() -> None:
     task, all_params = stage.task_arguments(__doc__, twin.TASKS)
     p = all_params.twin
-    with tracking.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend}},
+    with mlflow_runs.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
                             tags={"task": task, "backend": p.backend},
                             run_name=f"twin_evaluate-{task}") as run:
         if p.backend == "real":
-            rows = real_trials(task, p.real_dir)
+            rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
             rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task,
                                           video_root=Path("reports/twin/videos") / task)
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin_pipeline.METHODS}
+        counts = {m: sum(r["method"] == m for r in rows) for m in twin_pipeline.METHODS}
         run.metrics({f"{m}/successes": v for m, v in summary.items()})
+        run.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
         stage.write_json(Path("reports/twin") / f"{task}_eval.json",
                          {"task": task, "backend": p.backend, "trials": p.trials, "successes": summary,
                           "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
-    print(f"{task}: " + ", ".join(f"{m} {v}/{p.trials}" for m, v in summary.items()))
+    print(f"{task}: " + ", ".join(f"{m} {v}/{counts[m]}" for m, v in summary.items()))
 
 
 if __name__ == "__main__":

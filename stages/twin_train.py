@@ -2,26 +2,27 @@
 
 from pathlib import Path
 
-from lfdt import stage, tracking
+from lfdt import mlflow_runs, stage
 from lfdt.robot import twin, twin_pipeline
 
 
 def run() -> None:
     task, all_params = stage.task_arguments(__doc__, twin.TASKS)
     p = all_params.twin
-    params = {"twin": {k: v for k, v in p.model_dump().items() if k in ("seed", "dynamics", "translator", "bc")}}
-    with tracking.stage_run("twin_train", params, tags={"task": task, "seed": p.seed},
-                            run_name=f"twin_train-{task}") as run:
-        res = twin_pipeline.train(task, p, Path("models/twin") / task,
-                                  log=lambda m, i: run.metrics({f"translator/{k}": v for k, v in m.items()}, i))
-        flat = {f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()
-                if isinstance(vv, int | float) and not isinstance(vv, bool)}
-        run.metrics(flat)
-        stage.write_json(Path("reports/twin") / f"{task}_train.json",
-                         {"task": task, **res, "stage_wall_s": stage.wall_since_start(),
-                          "mlflow_run_id": run.run_id})
-    print(f"{task}: dynamics F ratio {res['dynamics']['forward_ratio']:.3f}, "
-          f"F^-1 ratio {res['dynamics']['inverse_ratio']:.3f}")
+    params = {"twin": {k: v for k, v in p.model_dump().items() if k in ("seeds", "dynamics", "translator", "bc")}}
+    per_seed = {}
+    for seed in p.seeds:
+        with mlflow_runs.stage_run("twin_train", params, tags={"task": task, "seed": seed},
+                                   run_name=f"twin_train-{task}-s{seed}") as run:
+            res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", log=lambda m, i, r=run:
+                                      r.metrics({f"translator/{k}": v for k, v in m.items()}, i))
+            run.metrics({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()
+                         if isinstance(vv, int | float) and not isinstance(vv, bool)})
+            per_seed[str(seed)] = {**res, "mlflow_run_id": run.run_id}
+        print(f"{task} seed {seed}: dynamics F ratio {res['dynamics']['forward_ratio']:.3f}, "
+              f"F^-1 ratio {res['dynamics']['inverse_ratio']:.3f}")
+    stage.write_json(Path("reports/twin") / f"{task}_train.json",
+                     {"task": task, "seeds": per_seed, "stage_wall_s": stage.wall_since_start()})
 
 
 if __name__ == "__main__":

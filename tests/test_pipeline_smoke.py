@@ -229,17 +229,22 @@ def test_mlflow_server_serves_the_pipeline_runs(project):
 def test_twin_pipeline_outputs(project):
     dst, _ = project
     runs = (dst / "reports/twin_runs.csv").read_text().splitlines()
-    assert runs[0] == "task,method,trial,success"
+    assert runs[0] == "task,method,seed,trial,success"
     rows = [r.split(",") for r in runs[1:]]
-    assert {(r[0], r[1]) for r in rows} == {(t, m) for t in ("block_push", "peg_insertion")
-                                            for m in ("bc_no_translation", "lfdt")}
-    assert len(rows) == 2 * 2 * 2 and {r[3] for r in rows} <= {"True", "False"}
+    assert {(r[0], r[1], r[2]) for r in rows} == {(t, m, s) for t in ("block_push", "peg_insertion")
+                                                  for m in ("bc_no_translation", "lfdt") for s in ("0", "1")}
+    assert len(rows) == 2 * 2 * 2 * 2 and {r[4] for r in rows} <= {"True", "False"}
     md = (dst / "reports/twin.md").read_text()
-    assert "paper (real robots)" in md and "10/10" in md and "8/10" in md
+    assert "paper (real robots)" in md and "10/10" in md and "8/10" in md and "seeds 0, 1" in md
     for task in ("block_push", "peg_insertion"):
-        files = sorted((dst / f"data/twin/{task}/demos_R1H").glob("episode_*.parquet"))
-        assert len(files) == 2
-        assert (dst / f"models/twin/{task}/lfdt").is_dir() and (dst / f"models/twin/{task}/translator.pt").exists()
+        for seed in (0, 1):
+            files = sorted((dst / f"data/twin/{task}/s{seed}/demos_R1H").glob("episode_*.parquet"))
+            assert len(files) == 2
+            models = dst / f"models/twin/{task}/s{seed}"
+            assert (models / "lfdt").is_dir() and (models / "translator.pt").exists()
+        # each seed is its own run: its own data
+        assert (dst / f"data/twin/{task}/s0/random_Y/episode_000000.parquet").read_bytes() != \
+               (dst / f"data/twin/{task}/s1/random_Y/episode_000000.parquet").read_bytes()
 
 
 def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(project):

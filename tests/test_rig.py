@@ -209,9 +209,9 @@ def tiny_models(tmp_path_factory) -> Path:
                    dynamics=DynamicsConfig(hidden=[32, 32], iterations=30, eval_every=10),
                    translator=TranslatorConfig(hidden=[32, 32], iterations=20, log_every=10, kinematics="learned"),
                    bc=BCConfig(hidden=[32, 32], iterations=20, eval_every=10))
-    twin_pipeline.collect("block_push", p, root=root / "data")
-    twin_pipeline.train("block_push", p, root / "models", root=root / "data")
-    return root / "models"
+    twin_pipeline.collect("block_push", p.model_copy(update={"seeds": [0]}), root=root / "data")
+    twin_pipeline.train("block_push", p, 0, root / "models" / "s0", root=root / "data")
+    return root / "models" / "s0"
 
 
 def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_path: Path, capsys) -> None:

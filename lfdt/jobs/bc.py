@@ -6,7 +6,7 @@ import time
 
 import torch
 
-from lfdt import bc, data, layout, methods, stage, tracking
+from lfdt import bc, data, layout, methods, mlflow_runs, stage
 from lfdt.jobs.common import BC_DATA, DATA_FILE, POLICIES, Config, numeric
 from lfdt.parallel import Progress
 
@@ -28,7 +28,7 @@ def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
     bcfg = p.bc
     torch.set_num_threads(bcfg.torch_threads)
     tasks = bc_tasks(cfg)
-    with tracking.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
+    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
                             run_name=f"train_bc-{cfg.name}") as run:
         members, metrics, curves = [], {}, []
         for task in tasks:

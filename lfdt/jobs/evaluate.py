@@ -7,7 +7,7 @@ import time
 import numpy as np
 import torch
 
-from lfdt import bc, evaluation, stage, tracking
+from lfdt import bc, evaluation, mlflow_runs, stage
 from lfdt.jobs.common import POLICIES, VIDEOS, Config, numeric
 from lfdt.parallel import Progress
 
@@ -20,7 +20,7 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
     torch.set_num_threads(1)
     policy, _ = bc.BCPolicy.load(cfg.dir(POLICIES))
     tags = {**cfg.tags(), "domain": "Y"}
-    with tracking.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
+    with mlflow_runs.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
                             run_name=f"evaluate-{cfg.name}") as run:
         trials = evaluation.run_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(VIDEOS), ecfg.video_size,
                                        progress=progress, purpose=ecfg.start_states)

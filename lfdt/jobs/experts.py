@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from lfdt import experts, stage, tracking
+from lfdt import experts, mlflow_runs, stage
 from lfdt.jobs.common import numeric
 from lfdt.parallel import Progress
 
@@ -22,7 +22,7 @@ def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
     p = stage.params(params_path)
     cfg, env_cfg, demos_cfg = p.experts, p.env, p.demos
     out = EXPERTS / pairing
-    with tracking.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
+    with mlflow_runs.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
                                               **experts.protocol_doc(demos_cfg)},
                             tags={"pairing": pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
                             run_name=f"train_experts-{pairing}") as run:

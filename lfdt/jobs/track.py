@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from lfdt import data, layout, methods, reexecute, stage, tracking, translation
+from lfdt import data, layout, methods, mlflow_runs, reexecute, stage, translation
 from lfdt.dynamics import load_models
 from lfdt.jobs.common import BC_DATA, DATA_FILE, DYNAMICS, Config, numeric
 from lfdt.parallel import Progress
@@ -18,7 +18,7 @@ def track_job(cfg: Config, progress: Progress | None = None) -> dict:
     source = Config(m.translator, cfg.demos, cfg.seed, cfg.params)
     df = data.read_transitions(source.dir(BC_DATA) / DATA_FILE["translated"])
     dyn = load_models(DYNAMICS) if p.track.controller == "inverse" else None
-    with tracking.stage_run("track_demos", {"track": p.track.model_dump(), **cfg.tags()}, tags=cfg.tags(),
+    with mlflow_runs.stage_run("track_demos", {"track": p.track.model_dump(), **cfg.tags()}, tags=cfg.tags(),
                             run_name=f"track_demos-{cfg.name}") as run:
         out, stats = reexecute.execute(df, p.env, p.track, dyn,
                                        progress=(lambda: progress.update(1)) if progress is not None else None)

@@ -6,7 +6,7 @@ import time
 
 import torch
 
-from lfdt import data, layout, stage, tracking, translation
+from lfdt import data, layout, mlflow_runs, stage, translation
 from lfdt.dynamics import load_models, load_random_y
 from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TRANSLATORS, Config, numeric
 from lfdt.nets import save_state
@@ -28,7 +28,7 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
     random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr) for pr in layout.PAIRINGS}
     y_random = load_random_y(RANDOM / "Y.parquet").y
-    with tracking.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
+    with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
                             run_name=f"train_translator-{cfg.name}") as run:
         tr, stats = translation.train_translator(demos, random_x, y_random, dyn, tcfg, seed=cfg.seed,
                                                  std_floor=p.dynamics.std_floor, log=run.metrics,

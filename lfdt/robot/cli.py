@@ -477,7 +477,8 @@ def add_deploy_parser(subparsers) -> None:
                                           "real_dir/TASK/deploy_METHOD.csv with twin.backend: real.")
     add_rig_arguments(p, task_required=True)
     p.add_argument("--method", required=True, choices=METHODS)
-    p.add_argument("--models", required=True, type=Path, metavar="DIR", help="trained models, e.g. models/twin/TASK")
+    p.add_argument("--models", required=True, type=Path, metavar="DIR",
+                   help="trained models of one seed, e.g. models/twin/TASK/s0")
     p.add_argument("--trials", type=int, required=True, metavar="N", help="trials to run")
     p.add_argument("--log", required=True, type=Path, metavar="CSV",
                    help="outcome log, e.g. data/real/TASK/deploy_METHOD.csv")

@@ -43,7 +43,6 @@ from lfdt.robot import kinematics
 from lfdt.robot.arm import SafeArm, SafetyError, SafetyLimits, TrackingLost, check_command, stop_on_interrupt
 from lfdt.robot.twin import LAYOUTS, TASKS
 
-ROBOTS = ("r1", "r2")
 HUMAN_DRIVERS = ("scripted", "random")
 
 
@@ -91,7 +90,7 @@ class Pose(_Model):
 Vec3 = tuple[float, float, float]
 
 
-class ArmConfig(_Model):
+class MyCobotConfig(_Model):
     """One myCobot 280: where it is connected, where its base stands, and what the safety layer allows."""
 
     port: str | None = None
@@ -118,7 +117,7 @@ class ArmConfig(_Model):
     """Where reset() brings the arm (degrees); None: kinematics.home_angles(task)."""
 
     @model_validator(mode="after")
-    def _one_connection(self) -> ArmConfig:
+    def _one_connection(self) -> MyCobotConfig:
         if (self.port is None) == (self.host is None):
             raise ValueError("give exactly one of 'port' (serial) or 'host' (TCP)")
         return self
@@ -172,7 +171,7 @@ class RigConfig(_Model):
     """block_push: world y of the line the block is pushed onto, for record-demos; None: the twin's 0.22 m."""
     reset_settle_s: Annotated[float, Field(ge=0)] = 5.0
     """reset(): longest wait for the arms to reach their start angles, s."""
-    arms: dict[Literal["r1", "r2"], ArmConfig] = Field(min_length=1)
+    arms: dict[Literal["r1", "r2"], MyCobotConfig] = Field(min_length=1)
     """The arms present, by name (r1: Robot1 in slot 1, r2: Robot2 in slot 2)."""
     camera: CameraConfig
     """The camera and its tags."""
@@ -194,7 +193,7 @@ class RigConfig(_Model):
         return self
 
 
-def workspace_bounds(task: str, arm: ArmConfig) -> tuple[np.ndarray, np.ndarray]:
+def workspace_bounds(task: str, arm: MyCobotConfig) -> tuple[np.ndarray, np.ndarray]:
     """The arm's 2D workspace in its base frame (free coordinates of the task plane, mm): the plane's bounds
     intersected with the safety box. Raises ValueError when they do not overlap or the plane misses the box."""
     plane = kinematics.TASK_PLANES[task]
@@ -212,7 +211,7 @@ def workspace_bounds(task: str, arm: ArmConfig) -> tuple[np.ndarray, np.ndarray]
     return lo, hi
 
 
-def safety_box(task: str, arm: ArmConfig, margin_mm: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+def safety_box(task: str, arm: MyCobotConfig, margin_mm: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
     """The flange box of an arm (base frame, mm): configured, or the task plane's bounds widened by ``margin_mm``."""
     plane = kinematics.TASK_PLANES[task]
     free = [i for i in range(3) if i != plane.fixed_axis]

@@ -6,14 +6,14 @@ import textwrap
 
 import mlflow
 
-from lfdt import tracking
+from lfdt import mlflow_runs
 
 
 def test_stage_run_logs_params_metrics_tags(tmp_path, monkeypatch):
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     monkeypatch.setenv("DVC_EXP_NAME", "exp-smoke")
-    with tracking.stage_run("unit", {"a": {"b": 1, "c": [1, 2]}}, tags={"seed": 3, "domain": "Y"}) as run:
+    with mlflow_runs.stage_run("unit", {"a": {"b": 1, "c": [1, 2]}}, tags={"seed": 3, "domain": "Y"}) as run:
         for step in range(2500):  # more than one batch
             run.metrics({"loss": 1.0 / (step + 1)}, step=step)
         run_id = run.run_id
@@ -33,7 +33,7 @@ def test_failed_stage_marks_run_failed(tmp_path, monkeypatch):
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     try:
-        with tracking.stage_run("boom", {}) as run:
+        with mlflow_runs.stage_run("boom", {}) as run:
             run_id = run.run_id
             raise RuntimeError("boom")
     except RuntimeError:
@@ -45,10 +45,10 @@ def test_two_stages_starting_at_once_share_one_experiment(tmp_path):
     script = textwrap.dedent(f"""
         import os
         os.environ["MLFLOW_TRACKING_URI"] = "sqlite:///{tmp_path / 'mlflow.db'}"
-        from lfdt import tracking
-        with tracking.stage_run("race", {{"x": 1}}) as run:
+        from lfdt import mlflow_runs
+        with mlflow_runs.stage_run("race", {{"x": 1}}) as run:
             run.metrics({{"m": 1.0}})
-        print(tracking.experiment_id())
+        print(mlflow_runs.experiment_id())
     """)
     procs = [subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for _ in range(3)]

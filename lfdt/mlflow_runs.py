@@ -161,12 +161,6 @@ class Tracker:
         if len(self._buffer) >= _BATCH:
             self.flush()
 
-    def series(self, key: str, values, steps=None) -> None:
-        """Queue a whole curve at once (e.g. a loss per epoch)."""
-        steps = range(len(values)) if steps is None else steps
-        for s, v in zip(steps, values):
-            self.metrics({key: v}, step=int(s))
-
     def flush(self) -> None:
         """Send queued metrics in batches of at most 900."""
         while self._buffer:
