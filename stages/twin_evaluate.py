@@ -1,10 +1,9 @@
 """DVC stage: trials of LfDT and BC without translation on one real-robot task (twin, or the robots' deploy logs)."""
 
-import csv
 from pathlib import Path
 
 from lfdt import mlflow_runs, stage
-from lfdt.robot import twin, twin_pipeline
+from lfdt.robot import deploy_log, twin, twin_pipeline
 
 
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
@@ -12,13 +11,11 @@ def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
     rows = []
     for method in twin_pipeline.METHODS:
         path = Path(real_dir) / task / f"deploy_{method}.csv"
-        if not path.exists():
-            raise FileNotFoundError(f"backend 'real': no deployment log {path}; run `python -m lfdt.robot deploy "
-                                    f"--task {task} --method {method} ...` on the robots")
-        with open(path) as fh:
-            rows += [{"task": task, "method": method, "seed": seed, "trial": int(r["trial"]),
-                      "success": r["success"] == "True"}
-                     for r in csv.DictReader(fh)]
+        trials = deploy_log.read_trials(path)
+        if not trials:
+            raise FileNotFoundError(f"backend 'real': no deployment log {path} (or it holds no trial); run "
+                                    f"`python -m lfdt.robot deploy --task {task} --method {method} ...` on the robots")
+        rows += [{"task": task, "method": method, "seed": seed, "trial": t, "success": ok} for t, ok in trials]
     return rows
 
 

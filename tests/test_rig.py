@@ -26,16 +26,16 @@ from lfdt.robot import kinematics, twin
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
 from lfdt.robot.calibration import calibration_from_intrinsics, save_calibration
 from lfdt.robot.cli import METHODS, TASKS, build_parser, main
+from lfdt.robot.real_rig import RealRig
 from lfdt.robot.recording import read_recording
-from lfdt.robot.rig import (
-    RealRig,
+from lfdt.robot.rig_config import (
     RigConfigError,
-    SimRig,
     example_rig_config,
     load_rig_config,
     parse_rig_config,
     write_rig_config,
 )
+from lfdt.robot.sim_rig import SimRig
 from lfdt.robot.tracker import ObjectPose, TrackedFrame, invert_pose, make_pose
 
 ROOT = Path(__file__).resolve().parents[1]

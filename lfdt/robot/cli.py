@@ -16,8 +16,6 @@ Exit code 2 also covers a refused target, lost tracking and an unusable rig conf
 from __future__ import annotations
 
 import argparse
-import csv
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -205,7 +203,7 @@ def add_write_rig_config_parser(subparsers) -> None:
 
 def run_write_rig_config(args: argparse.Namespace) -> int:
     """Write the example; exit 2 when the file exists and --force is not given."""
-    from lfdt.robot.rig import write_rig_config
+    from lfdt.robot.rig_config import write_rig_config
 
     try:
         path = write_rig_config(args.out, args.task, overwrite=args.force)
@@ -234,7 +232,7 @@ def add_rig_arguments(parser: argparse.ArgumentParser, task_required: bool = Fal
 
 def _rig_task(args: argparse.Namespace):
     """The task and the rig config (None with --sim and no --rig); exit-2 errors as RigConfigError."""
-    from lfdt.robot.rig import RigConfigError, load_rig_config
+    from lfdt.robot.rig_config import RigConfigError, load_rig_config
 
     config = None
     if args.rig is not None:
@@ -251,7 +249,8 @@ def _rig_task(args: argparse.Namespace):
 
 def _make_rig(args: argparse.Namespace, task: str, config, domain: str, human: str, seed: int,
               max_steps: int | None = None):
-    from lfdt.robot.rig import RealRig, SimRig
+    from lfdt.robot.real_rig import RealRig
+    from lfdt.robot.sim_rig import SimRig
 
     if args.sim:
         return SimRig(task, domain, seed=seed, human=human, step_delay=args.step_delay, max_steps=max_steps)
@@ -270,7 +269,7 @@ def _ask_yes_no(question: str) -> bool:
 
 def _wait_for_operator(rig, prompt: str, skip: bool) -> None:
     """Real robots: let the operator set the scene before an episode (unless --yes)."""
-    from lfdt.robot.rig import RealRig
+    from lfdt.robot.real_rig import RealRig
 
     if isinstance(rig, RealRig) and not skip:
         input(f"{prompt}; press Enter to start ")
@@ -487,40 +486,17 @@ def add_deploy_parser(subparsers) -> None:
     p.set_defaults(func=run_deploy)
 
 
-def _logged_trials(path: Path) -> int:
-    """Trials already in a deploy log (checks its header)."""
-    if not path.exists() or path.stat().st_size == 0:
-        return 0
-    with open(path, newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header != ["trial", "success"]:
-            raise ValueError(f"{path}: header {header} is not ['trial', 'success']")
-        return sum(1 for row in reader if row)
-
-
-def _log_trial(path: Path, trial: int, success: bool) -> None:
-    new = not path.exists() or path.stat().st_size == 0
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a", newline="") as fh:
-        w = csv.writer(fh)
-        if new:
-            w.writerow(["trial", "success"])
-        w.writerow([trial, str(bool(success))])  # "True"/"False": what stages/twin_evaluate.py compares with
-        fh.flush()
-        os.fsync(fh.fileno())  # a trial's outcome survives a crash of the next trial
-
-
 def run_deploy(args: argparse.Namespace) -> int:
     """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C."""
     from lfdt.evaluation import evaluation_seeds
+    from lfdt.robot import deploy_log
     from lfdt.robot.rig import running
     from lfdt.robot.twin_pipeline import load_policy
 
     task, config = _rig_task(args)
     try:
-        done = _logged_trials(args.log)
-    except ValueError as e:
+        done = len(deploy_log.read_trials(args.log))
+    except deploy_log.DeployLogError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_FAILED
     policy = load_policy(task, args.method, args.models)
@@ -543,14 +519,15 @@ def run_deploy(args: argparse.Namespace) -> int:
                 ok = rig.outcome()
                 if ok is None:
                     ok = _ask_yes_no(f"trial {trial}: did the task succeed?")
-                _log_trial(args.log, trial, ok)
+                deploy_log.append_trial(args.log, trial, ok)
                 successes += ok
                 bar.update(1)
     except KeyboardInterrupt:
-        print(f"interrupted: arms stopped; {_logged_trials(args.log)} trials in {args.log}", file=sys.stderr)
+        n = len(deploy_log.read_trials(args.log))
+        print(f"interrupted: arms stopped; {n} trials in {args.log}", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(f"{task} {args.method}: {successes}/{args.trials} successful; log {args.log} "
-          f"({_logged_trials(args.log)} trials in all)")
+          f"({len(deploy_log.read_trials(args.log))} trials in all)")
     return 0
 
 
@@ -571,7 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments)."""
-    from lfdt.robot.rig import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
+    from lfdt.robot.rig_config import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
 
     args = build_parser().parse_args(argv)
     try:
