@@ -2,12 +2,12 @@
 
 from pathlib import Path
 
-from lfdt import mlflow_runs, stage
-from lfdt.robot import twin, twin_pipeline
+from lfdt import mlflow_runs, stage, tasks
+from lfdt.twin import pipeline as twin_pipeline
 
 
 def run() -> None:
-    task, all_params = stage.task_arguments(__doc__, twin.TASKS)
+    task, all_params = stage.task_arguments(__doc__, tasks.NAMES)
     p = all_params.twin
     with mlflow_runs.stage_run("twin_collect", {"twin": p.model_dump()},
                             tags={"task": task, "seeds": ",".join(map(str, p.seeds)), "backend": p.backend},

@@ -2,14 +2,15 @@
 
 from pathlib import Path
 
-from lfdt import mlflow_runs, stage
-from lfdt.robot import deploy_log, twin, twin_pipeline
+from lfdt import mlflow_runs, stage, tasks, twin
+from lfdt.robot import deploy_log
+from lfdt.twin import pipeline as twin_pipeline
 
 
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
     """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots (of the policies of ``seed``)."""
     rows = []
-    for method in twin_pipeline.METHODS:
+    for method in twin.METHODS:
         path = Path(real_dir) / task / f"deploy_{method}.csv"
         trials = deploy_log.read_trials(path)
         if not trials:
@@ -20,7 +21,7 @@ def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
 
 
 def run() -> None:
-    task, all_params = stage.task_arguments(__doc__, twin.TASKS)
+    task, all_params = stage.task_arguments(__doc__, tasks.NAMES)
     p = all_params.twin
     with mlflow_runs.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
                             tags={"task": task, "backend": p.backend},
@@ -30,8 +31,8 @@ def run() -> None:
         else:
             rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task,
                                           video_root=Path("reports/twin/videos") / task)
-        summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin_pipeline.METHODS}
-        counts = {m: sum(r["method"] == m for r in rows) for m in twin_pipeline.METHODS}
+        summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}
+        counts = {m: sum(r["method"] == m for r in rows) for m in twin.METHODS}
         run.metrics({f"{m}/successes": v for m, v in summary.items()})
         run.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
         stage.write_json(Path("reports/twin") / f"{task}_eval.json",

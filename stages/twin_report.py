@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lfdt import methods, stage
+from lfdt import methods, stage, tasks, twin
 from lfdt.evaluation import seed_state_interval, wilson_interval
-from lfdt.robot import twin, twin_pipeline
 
 
 def interval(trials: list[dict]) -> tuple[float, float]:
@@ -31,17 +30,17 @@ def run() -> None:
     lines += [f"# Real-robot tasks ({source})", "",
               "| task | method | ours | successes | per seed | 95 % interval | paper (real robots) |",
               "| --- | --- | --- | --- | --- | --- | --- |"]
-    for task in twin.TASKS:
+    for task in tasks.NAMES:
         ev = json.loads(Path(f"reports/twin/{task}_eval.json").read_text())
         rows += [{k: r[k] for k in ("task", "method", "seed", "trial", "success")} for r in ev["per_trial"]]
-        for method in twin_pipeline.METHODS:
+        for method in twin.METHODS:
             trials = [r for r in ev["per_trial"] if r["method"] == method]
             k, n = sum(r["success"] for r in trials), len(trials)
             seeds = sorted({r["seed"] for r in trials})
             per_seed = ", ".join(f"{100 * np.mean([r['success'] for r in trials if r['seed'] == s]):.0f}"
                                  for s in seeds)
             lo, hi = interval(trials)
-            pk, pn = twin_pipeline.PAPER_REAL[task][method]
+            pk, pn = twin.PAPER_REAL[task][method]
             lines.append(f"| {task} | {methods.get(method).title} | **{100 * k / max(n, 1):.0f} %** | {k}/{n} | "
                          f"{per_seed} | {100 * lo:.0f}–{100 * hi:.0f} % | {pk}/{pn} |")
     lines += ["", f"Data per task and seed: {p.random_samples} random-motion samples per domain, "

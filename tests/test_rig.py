@@ -20,9 +20,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from lfdt import data
+from lfdt import data, tasks, twin
 from lfdt.robot import fake_mycobot as fm
-from lfdt.robot import kinematics, twin
+from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
 from lfdt.robot.calibration import calibration_from_intrinsics, save_calibration
 from lfdt.robot.cli import METHODS, TASKS, build_parser, main
@@ -37,6 +37,7 @@ from lfdt.robot.rig_config import (
 )
 from lfdt.robot.sim_rig import SimRig
 from lfdt.robot.tracker import ObjectPose, TrackedFrame, invert_pose, make_pose
+from lfdt.twin import pipeline as twin_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 30
@@ -81,9 +82,7 @@ def test_example_config_is_valid_and_errors_name_the_key(tmp_path: Path) -> None
 
 
 def test_cli_lists_match_the_pipeline() -> None:
-    from lfdt.robot import twin_pipeline
-
-    assert TASKS == twin.TASKS and METHODS == twin_pipeline.METHODS
+    assert TASKS == tasks.NAMES and METHODS == twin.METHODS
     a = build_parser().parse_args(["record-random", "--sim", "--task", "block_push", "--domain", "Y", "--episodes",
                                    "1", "--steps", "2", "--out", "x"])
     assert a.func.__name__ == "run_record_random" and a.seed == 0 and a.step_delay == 0.0
@@ -138,7 +137,7 @@ def _assert_only_finished_episodes(out: Path) -> int:
         assert len(t) == STEPS, f"{f.name} has {len(t)} frames"
         assert (t.episode_index == i).all() and t.frame_index.tolist() == list(range(STEPS))
         assert not t.isna().any().any()
-    data.check_transitions(out, "random", "Y", twin.BLOCK_PUSH)
+    data.check_transitions(out, "random", "Y", tasks.get("block_push").layout)
     assert len(read_recording(out)) == STEPS * len(files)
     # anything else is the metadata or a temporary that never got a final name
     others = [p.name for p in out.iterdir() if p not in files]
@@ -189,21 +188,19 @@ def test_record_demos_sim_keeps_successful_episodes(tmp_path: Path, capsys) -> N
     assert main(["record-demos", "--sim", "--task", "peg_insertion", "--pairing", "HR2", "--episodes", "2",
                  "--out", str(out)]) == 0
     assert "kept 2 successful demonstrations" in capsys.readouterr().out
-    meta = data.check_transitions(out, "demos", "HR2", twin.PEG_INSERTION)
+    meta = data.check_transitions(out, "demos", "HR2", tasks.get("peg_insertion").layout)
     assert meta["source"] == "twin" and meta["task"] == "peg_insertion"
     df = data.read_transitions(out)
     assert sorted(df.episode_index.unique()) == [0, 1]
     assert [c for c in df.columns if c.startswith("action.")] == ["action.r2.dx", "action.r2.dz"]
     # the same episodes as the twin's own scripted demonstrations (same seeds, same program, same person)
-    twin.record_demos("peg_insertion", "HR2", 2, 0, tmp_path / "twin_demos")
+    twin_pipeline.record_demos("peg_insertion", "HR2", 2, 0, tmp_path / "twin_demos")
     np.testing.assert_array_equal(df.to_numpy(), data.read_transitions(tmp_path / "twin_demos").to_numpy())
 
 
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory) -> Path:
     from lfdt.config import BCConfig, DynamicsConfig, TranslatorConfig, TwinParams
-    from lfdt.robot import twin_pipeline
-
     root = tmp_path_factory.mktemp("twin")
     p = TwinParams(random_samples=120, random_episode_steps=20, demos_per_pairing=2, trials=2, videos=0,
                    dynamics=DynamicsConfig(hidden=[32, 32], iterations=30, eval_every=10),
@@ -215,8 +212,6 @@ def tiny_models(tmp_path_factory) -> Path:
 
 
 def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_path: Path, capsys) -> None:
-    from lfdt.robot import twin_pipeline
-
     real_dir = tmp_path / "real"
     for method in METHODS:
         log = real_dir / "block_push" / f"deploy_{method}.csv"
@@ -230,7 +225,7 @@ def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_pat
         assert all(r[1] in ("True", "False") for r in rows[1:])
         # the twin evaluation of the same policy from the same start states gives the same outcomes
         policy = twin_pipeline.load_policy("block_push", method, tiny_models)
-        expected = [str(r["success"]) for r in twin.evaluate("block_push", policy, 3)]
+        expected = [str(r["success"]) for r in twin_pipeline.evaluate_policy("block_push", policy, 3)]
         assert [r[1] for r in rows[1:]] == expected
     assert "block_push lfdt: " in capsys.readouterr().out
     spec = importlib.util.spec_from_file_location("twin_evaluate_stage", ROOT / "stages" / "twin_evaluate.py")
@@ -245,13 +240,15 @@ def test_sim_rig_interface() -> None:
     try:
         obs = rig.reset(seed=5)
         assert obs.shape == (7,) and rig.robots == ("r1",) and rig.human_slot == 1
-        assert rig.state_columns() == twin.BLOCK_PUSH.state_columns("R1H")
+        assert rig.state_columns() == tasks.get("block_push").layout.state_columns("R1H")
         with pytest.raises(ValueError, match=r"domain R1H commands \['r1'\]"):
             rig.act({"r1": [0.0, 0.0], "r2": [0.0, 0.0]})
-        rig.act({"r1": [0.004, 0.004]})
+        with pytest.raises(ValueError, match="human_target"):
+            rig.act({"r1": [0.004, 0.004]})  # the random person goes where the recording loop says
+        rig.act({"r1": [0.004, 0.004]}, human_target=[0.003, -0.002])
         nxt = rig.observe()
         assert not np.allclose(nxt[:2], obs[:2]) and not rig.done
-        assert rig.human_action(obs, nxt).shape == (2,) and np.all(np.abs(rig.human_action(obs, nxt)) <= 0.008)
+        np.testing.assert_array_equal(rig.human_action(obs, nxt), [0.003, -0.002])
     finally:
         rig.close()
 

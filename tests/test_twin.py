@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
-from lfdt import data, layout
-from lfdt.robot import twin
+from lfdt import data, layout, tasks
 from lfdt.robot.recording import EpisodeRecorder, read_recording
+from lfdt.twin import pipeline as twin_pipeline
+from lfdt.twin.env import TwinConfig, TwinEnv
+from lfdt.twin.programs import TwinDemonstrator
 
 
 def run(env, policy, seed):
@@ -17,21 +19,21 @@ def run(env, policy, seed):
     return info, steps, obs
 
 
-@pytest.mark.parametrize("task", twin.TASKS)
+@pytest.mark.parametrize("task", tasks.NAMES)
 @pytest.mark.parametrize("pairing", layout.PAIRINGS)
 def test_scripted_demonstrations_succeed(task, pairing):
     ok = 0
     for seed in range(10):
-        env = twin.TwinEnv(task, pairing)
+        env = TwinEnv(task, pairing)
         env.reset(seed=seed)
-        demo = twin.ScriptedDemo(env)
+        demo = TwinDemonstrator(env)
         info, steps, _ = run(env, demo, seed)
         ok += info["is_success"]
     assert ok >= 9
 
 
 def test_robot_end_follows_target_with_speed_limit_and_lag():
-    env = twin.TwinEnv("block_push", "Y")
+    env = TwinEnv("block_push", "Y")
     obs, _ = env.reset(seed=0)
     start = obs[:2].copy()
     far = np.array([0.0, 0.05, 0.0, 0.0])  # 5 cm ahead in one command: more than one step of travel
@@ -45,13 +47,13 @@ def test_robot_end_follows_target_with_speed_limit_and_lag():
 
 
 def test_human_hand_differs_from_a_robot_end():
-    cfg = twin.TwinConfig()
+    cfg = TwinConfig()
     assert cfg.human_speed > 1.5 * cfg.robot_speed and cfg.human_noise > 0
-    bp = twin.TwinEnv("block_push", "R1H")
+    bp = TwinEnv("block_push", "R1H")
     assert bp.model.geom("hand").type == 2  # a sphere, where the robot has a finger cylinder
     # the person holds the peg further from its centre and tilted: same hand, other object pose
-    robot = twin.TwinEnv("peg_insertion", "Y")
-    human = twin.TwinEnv("peg_insertion", "R1H")
+    robot = TwinEnv("peg_insertion", "Y")
+    human = TwinEnv("peg_insertion", "R1H")
     o_r, _ = robot.reset(seed=3)
     o_h, _ = human.reset(seed=3)
     assert np.allclose(o_r[2:4], o_h[2:4], atol=0.01)  # the holding end starts at the same place
@@ -60,7 +62,7 @@ def test_human_hand_differs_from_a_robot_end():
 
 
 def test_block_push_needs_both_arms():
-    env = twin.TwinEnv("block_push", "Y")
+    env = TwinEnv("block_push", "Y")
     env.reset(seed=1)
     one_arm = np.array([0.0, 0.006, 0.0, 0.0])
     info, _, obs = run(env, lambda o: one_arm, 1)
@@ -68,7 +70,7 @@ def test_block_push_needs_both_arms():
 
 
 def test_peg_insertion_needs_alignment():
-    env = twin.TwinEnv("peg_insertion", "Y")
+    env = TwinEnv("peg_insertion", "Y")
     straight = np.array([0.0, 0.0, 0.006, 0.0])  # the peg goes straight ahead, the receptacle waits
 
     info, _, _ = run(env, lambda o: straight, 2)
@@ -78,9 +80,9 @@ def test_peg_insertion_needs_alignment():
 
 def test_same_seed_same_trajectory():
     def roll():
-        env = twin.TwinEnv("peg_insertion", "HR2")
+        env = TwinEnv("peg_insertion", "HR2")
         obs, _ = env.reset(seed=5)
-        demo = twin.ScriptedDemo(env)
+        demo = TwinDemonstrator(env)
         out = [obs]
         for _ in range(10):
             obs, *_ = env.step(demo(obs))
@@ -91,21 +93,21 @@ def test_same_seed_same_trajectory():
 
 
 def test_recordings_follow_the_data_conventions(tmp_path):
-    n = twin.record_random("block_push", "R1H", 95, 30, 0, tmp_path / "random_R1H")
+    n = twin_pipeline.record_random("block_push", "R1H", 95, 30, 0, tmp_path / "random_R1H")
     assert n == 95
-    meta = data.check_transitions(tmp_path / "random_R1H", "random", "R1H", twin.BLOCK_PUSH)
+    meta = data.check_transitions(tmp_path / "random_R1H", "random", "R1H", tasks.get("block_push").layout)
     assert meta["task"] == "block_push"
     df = read_recording(tmp_path / "random_R1H")
     assert len(df) == 95 and df.episode_index.nunique() == 4
     assert list(df.columns[:3]) == ["episode_index", "frame_index", "timestamp"]
-    stats = twin.record_demos("peg_insertion", "HR2", 3, 0, tmp_path / "demos_HR2")
+    stats = twin_pipeline.record_demos("peg_insertion", "HR2", 3, 0, tmp_path / "demos_HR2")
     assert stats["demonstrations"] == 3
     df = data.read_transitions(tmp_path / "demos_HR2")
     assert [c for c in df.columns if c.startswith("action.")] == ["action.r2.dx", "action.r2.dz"]
 
 
 def test_recorder_writes_only_finished_episodes(tmp_path):
-    schema = twin.twin_schema("block_push", "Y", "random", {})
+    schema = twin_pipeline.twin_schema("block_push", "Y", "random", {})
     rec = EpisodeRecorder(tmp_path, schema, 0.1)
     rec.start()
     for _ in range(3):

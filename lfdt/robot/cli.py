@@ -20,6 +20,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from lfdt import tasks, twin
 from lfdt.robot.arm import (
     ArmNotResponding,
     MyCobotArm,
@@ -35,8 +36,8 @@ EXIT_FAILED = 2
 """A refused command or an arm that does not answer (the same code argparse uses for bad arguments)."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C (128 + SIGINT), as shells report it."""
-TASKS = ("block_push", "peg_insertion")
-METHODS = ("bc_no_translation", "lfdt")
+TASKS = tasks.NAMES
+METHODS = twin.METHODS
 
 MOVE_LIMITS = SafetyLimits(max_step_deg=None)
 """``move``: joint limits, speed and the default workspace box (flange 40 mm or more above the mounting surface,
@@ -322,8 +323,9 @@ def add_record_random_parser(subparsers) -> None:
     """Register ``record-random``."""
     p = subparsers.add_parser("record-random", help="record random motion of the robots (dynamics data)",
                               description="Random motion in one domain: each robot's target is a random offset "
-                                          "of up to --reach from its end, held for 1..--hold-max steps (as "
-                                          "twin.random_action); the person moves freely (robots) or randomly "
+                                          "of up to --reach from its end, held for 1..--hold-max steps "
+                                          "(recording.record_random_episode); the person moves freely (robots) "
+                                          "or randomly "
                                           "(--sim). One Parquet file per episode under --out (twin_schema "
                                           "'random'); the human slot's action is its measured motion (robots) "
                                           "or its random target (--sim). Episodes already in --out are kept "
@@ -347,34 +349,21 @@ def run_record_random(args: argparse.Namespace) -> int:
     """Record ``--episodes`` episodes of ``--steps`` random steps; returns 0, or 130 on Ctrl-C."""
     import numpy as np
 
-    from lfdt.robot import twin
-    from lfdt.robot.recording import EpisodeRecorder
+    from lfdt.robot.recording import EpisodeRecorder, record_random_episode
     from lfdt.seeding import episode_seed
+    from lfdt.twin.pipeline import twin_schema
 
     task, config = _rig_task(args)
     rig = _make_rig(args, task, config, args.domain, args.human, args.seed)
     meta = _metadata(args, config, seed=args.seed, steps=args.steps, reach=args.reach, hold_max=args.hold_max)
-    rec = EpisodeRecorder(args.out, twin.twin_schema(task, args.domain, "random", meta), rig.control_dt)
+    rec = EpisodeRecorder(args.out, twin_schema(task, args.domain, "random", meta), rig.control_dt)
 
     def episode() -> bool:
         index = rec.start()
         s = episode_seed("random", args.seed, args.domain, index)
-        rng = np.random.default_rng(s)
-        obs = rig.reset(seed=s)
+        rig.reset(seed=s)
         _wait_for_operator(rig, f"episode {index}: robots at their start poses", args.yes)
-        rel, hold = {}, 0
-        for _ in range(args.steps):
-            if hold == 0:
-                rel = {r: rng.uniform(-args.reach, args.reach, size=2) for r in rig.robots}
-                hold = int(rng.integers(1, args.hold_max + 1))
-            rig.act(rel)
-            nxt = rig.observe()
-            action = np.zeros((2, 2))
-            for slot, arm in enumerate(rig.slots):
-                action[slot] = rig.human_action(obs, nxt) if arm == "h" else rel[arm]
-            rec.add(obs, action.reshape(-1), nxt)
-            obs, hold = nxt, hold - 1
-        rec.finish()
+        record_random_episode(rig, rec, np.random.default_rng(s), args.steps, args.reach, args.hold_max)
         return True
 
     code = _record_loop(rig, rec, args.out, args.episodes, "episode", episode)
@@ -388,7 +377,8 @@ def add_record_demos_parser(subparsers) -> None:
     """Register ``record-demos``."""
     p = subparsers.add_parser("record-demos", help="record demonstrations with one robot and a person",
                               description="Demonstrations in domain X: the pairing's robot replays the programmed "
-                                          "motion (twin.ProgrammedMotion) while the person's hand is tracked; "
+                                          "motion (lfdt.twin.programs.ProgrammedMotion) while the person's hand "
+                                          "is tracked; "
                                           "after each episode the operator says whether it succeeded (--sim: "
                                           "the twin's success flag; --yes: keep every episode). Successful "
                                           "episodes are kept (one Parquet file each, twin_schema 'demos'), "
@@ -408,9 +398,10 @@ def add_record_demos_parser(subparsers) -> None:
 def run_record_demos(args: argparse.Namespace) -> int:
     """Record until ``--episodes`` successful demonstrations are kept; exit 2 after --max-attempts."""
     from lfdt import layout
-    from lfdt.robot import twin
-    from lfdt.robot.recording import EpisodeRecorder
+    from lfdt.robot.recording import EpisodeRecorder, record_demo_episode
     from lfdt.seeding import episode_seed
+    from lfdt.twin.pipeline import twin_schema
+    from lfdt.twin.programs import ProgrammedMotion
 
     task, config = _rig_task(args)
     rig = _make_rig(args, task, config, args.pairing, "scripted", args.seed, max_steps=args.steps)
@@ -418,7 +409,7 @@ def run_record_demos(args: argparse.Namespace) -> int:
     slot = rig.slots.index(robot)
     max_attempts = args.max_attempts or 5 * args.episodes
     meta = _metadata(args, config, seed=args.seed, steps=args.steps)
-    rec = EpisodeRecorder(args.out, twin.twin_schema(task, args.pairing, "demos", meta), rig.control_dt)
+    rec = EpisodeRecorder(args.out, twin_schema(task, args.pairing, "demos", meta), rig.control_dt)
     goal_line = config.goal_line_m if config is not None and not args.sim else None
     attempts = {"n": 0, "first": rec.next_index()}
 
@@ -429,19 +420,11 @@ def run_record_demos(args: argparse.Namespace) -> int:
         s = episode_seed("demos", args.seed, args.pairing, attempts["first"] + attempts["n"])
         attempts["n"] += 1
         rec.start()
-        obs = rig.reset(seed=s)
+        rig.reset(seed=s)
         _wait_for_operator(rig, f"attempt {attempts['n']}: robot at its start pose, set the scene", args.yes)
-        program = twin.ProgrammedMotion(task, slot, obs, rig.control_dt, goal_line=goal_line)
-        for _ in range(args.steps):
-            rel = program.next_target() - obs[2 * slot:2 * slot + 2]
-            rig.act({robot: rel})
-            nxt = rig.observe()
-            rec.add(obs, rel, nxt)  # the robot's commanded relative target; the hand is only tracked
-            obs = nxt
-            if rig.done:
-                break
-        rig.stop()  # the arm holds while the outcome is decided
-        ok = rig.outcome()
+        obs = rig.observe()  # the scene as the operator set it: the program is made from it, once per take
+        program = ProgrammedMotion(task, slot, obs, rig.control_dt, goal_line=goal_line)
+        ok, _ = record_demo_episode(rig, rec, program, robot, args.steps)
         if ok is None:
             ok = True if args.yes else _ask_yes_no(f"attempt {attempts['n']}: did the demonstration succeed?")
         if ok:
@@ -467,7 +450,8 @@ class _GiveUp(RuntimeError):
 def add_deploy_parser(subparsers) -> None:
     """Register ``deploy``."""
     p = subparsers.add_parser("deploy", help="run a trained policy on both robots and log the outcomes",
-                              description="Trials of a trained twin policy (twin_pipeline.load_policy) in domain Y: "
+                              description="Trials of a trained twin policy (lfdt.twin.pipeline.load_policy) in "
+                                          "domain Y: "
                                           "up to --steps control steps per trial, then the operator says whether "
                                           "the task succeeded (--sim: the twin's success flag, from the twin "
                                           "evaluation's start states). Each outcome is appended to --log as a "
@@ -491,7 +475,7 @@ def run_deploy(args: argparse.Namespace) -> int:
     from lfdt.evaluation import evaluation_seeds
     from lfdt.robot import deploy_log
     from lfdt.robot.rig import running
-    from lfdt.robot.twin_pipeline import load_policy
+    from lfdt.twin.pipeline import load_policy
 
     task, config = _rig_task(args)
     try:

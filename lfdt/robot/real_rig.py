@@ -172,7 +172,7 @@ class RealRig(Rig):
         except SafetyError as e:
             raise SafetyError(f"{name}: {e}") from None
 
-    def act(self, relative_targets: Mapping[str, Any]) -> None:
+    def act(self, relative_targets: Mapping[str, Any], human_target: Any = None) -> None:
         """Plan every robot's command first, then send them: one refusal sends nothing to any arm."""
         targets = self._targets(relative_targets)
         plans = {name: self.plan(name, rel) for name, rel in targets.items()}

@@ -80,3 +80,51 @@ def read_recording(directory: str | Path) -> pd.DataFrame:
     if not files:
         raise FileNotFoundError(f"no finished episodes ({EPISODE_GLOB}) in {directory}")
     return data.read_transitions(directory)
+
+
+def record_random_episode(rig, rec: EpisodeRecorder, rng: np.random.Generator, steps: int, reach: float,
+                          hold_max: int) -> int:
+    """One episode of random motion on a reset rig, recorded into ``rec`` (started by the caller, finished here).
+
+    Every ``1..hold_max`` steps each slot gets a new target, a uniform offset of up to ``reach`` m per axis from
+    its end; the robots are sent theirs, the human slot's is offered to the rig (the twin's random person moves
+    there; a real person moves freely and the rig records the hand's measured motion). Returns the steps taken.
+    """
+    obs = rig.observe()
+    rel, hold = np.zeros((2, 2)), 0
+    for _ in range(steps):
+        if hold == 0:
+            rel = rng.uniform(-reach, reach, size=(2, 2))
+            hold = int(rng.integers(1, hold_max + 1))
+        rig.act({arm: rel[slot] for slot, arm in enumerate(rig.slots) if arm != "h"},
+                human_target=None if rig.human_slot is None else rel[rig.human_slot])
+        nxt = rig.observe()
+        action = np.array([rig.human_action(obs, nxt) if arm == "h" else rel[slot]
+                           for slot, arm in enumerate(rig.slots)])
+        rec.add(obs, action.reshape(-1), nxt)
+        obs, hold = nxt, hold - 1
+    rec.finish()
+    return steps
+
+
+def record_demo_episode(rig, rec: EpisodeRecorder, program, robot: str, steps: int) -> tuple[bool | None, int]:
+    """One demonstration on a reset rig, recorded into ``rec`` (started by the caller, who keeps or drops it).
+
+    ``program`` (:class:`lfdt.twin.programs.ProgrammedMotion`) gives the robot's absolute targets; the robot's
+    action is its commanded target relative to its end, the hand is only observed. Stops at ``steps`` or when the
+    rig says the episode is over, then stops the arms. Returns the rig's outcome (None: the rig cannot tell) and
+    the steps taken.
+    """
+    slot = rig.slots.index(robot)
+    obs = rig.observe()
+    n = 0
+    while n < steps:
+        rel = program.next_target() - obs[2 * slot:2 * slot + 2]
+        rig.act({robot: rel})
+        nxt = rig.observe()
+        rec.add(obs, rel, nxt)
+        obs, n = nxt, n + 1
+        if rig.done:
+            break
+    rig.stop()  # the arm holds while the outcome is decided
+    return rig.outcome(), n

@@ -7,10 +7,10 @@ configuration is :mod:`lfdt.robot.rig_config`.
 in observations, like the twin's: block push moves in the horizontal plane (x, y), peg insertion in the vertical
 plane (x, z). Each arm's base pose in that frame comes from :class:`~lfdt.robot.rig_config.RigConfig`; the camera's
 comes from the table tag, whose pose in the world frame is configured (so :class:`~lfdt.robot.tracker.Tracker`
-reports in the world frame directly). To replay :class:`~lfdt.robot.twin.ProgrammedMotion` unchanged, put the world
+reports in the world frame directly). To replay :class:`~lfdt.twin.programs.ProgrammedMotion` unchanged, put the world
 frame where the twin's is (see :func:`~lfdt.robot.rig_config.example_rig_config`).
 
-**State** (layout ``twin.LAYOUTS[task].state_columns(domain)``, metres and radians): per slot the end position in
+**State** (layout ``tasks.get(task).layout.state_columns(domain)``, metres and radians): per slot the end position in
 the task plane (a robot's flange from forward kinematics of its joint angles, moved to the world frame; the hand's
 tag centre from the tracker), then the object tag's position in the plane and its angle in the plane: the twist of
 the tag's rotation about the plane's normal (block push: yaw about world +z; peg insertion: pitch about world +y,
@@ -34,17 +34,15 @@ from typing import Any
 
 import numpy as np
 
-from lfdt import layout
+from lfdt import layout, tasks
 from lfdt.robot.arm import stop_on_interrupt
-from lfdt.robot.twin import LAYOUTS, TASKS
 
 
 def plane_angle(rotation: np.ndarray, task: str) -> float:
-    """In-plane angle (rad) of a rotation: twist about world +z (block_push) or +y (peg_insertion)."""
+    """In-plane angle (rad) of a rotation: its twist about the axis the task's object angle turns about."""
     from lfdt.robot.tracker import rotation_about_axis
 
-    axis = (0.0, 0.0, 1.0) if task == "block_push" else (0.0, 1.0, 0.0)
-    return rotation_about_axis(rotation, axis)
+    return rotation_about_axis(rotation, tasks.get(task).normal)
 
 
 def _wrap(angle: float) -> float:
@@ -59,12 +57,11 @@ class Rig(ABC):
     control_dt: float
 
     def _init_slots(self, task: str, domain: str) -> None:
-        if task not in TASKS:
-            raise ValueError(f"unknown task {task!r}; expected one of {TASKS}")
+        task_def = tasks.get(task)
         if domain not in layout.DOMAINS:
             raise ValueError(f"unknown domain {domain!r}; expected one of {layout.DOMAINS}")
         self.task, self.domain = task, domain
-        self.layout = LAYOUTS[task]
+        self.layout = task_def.layout
         self.slots: tuple[str, str] = layout.DOMAIN_ARMS[domain]
         self.robots: tuple[str, ...] = tuple(a for a in self.slots if a != "h")
         self.human_slot: int | None = self.slots.index("h") if "h" in self.slots else None
@@ -89,8 +86,11 @@ class Rig(ABC):
         """The state (``state_columns()`` order), metres and radians in the world frame's task plane."""
 
     @abstractmethod
-    def act(self, relative_targets: Mapping[str, Any]) -> None:
-        """Command each robot of the domain to its end's target relative to the last observation (m, 2 numbers)."""
+    def act(self, relative_targets: Mapping[str, Any], human_target: Any = None) -> None:
+        """Command each robot of the domain to its end's target relative to the last observation (m, 2 numbers).
+
+        ``human_target``: where a recording would like the person's hand to go (relative, m); a simulated person
+        may follow it, a real one moves as they do."""
 
     @abstractmethod
     def reset(self, seed: int | None = None) -> np.ndarray:

@@ -12,9 +12,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from lfdt import tasks
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyLimits
-from lfdt.robot.twin import TASKS
 
 HUMAN_DRIVERS = ("scripted", "random")
 
@@ -130,8 +130,8 @@ class RigConfig(_Model):
 
     notes: dict[str, str] = Field(default_factory=dict, alias="_notes")
     """Free-form explanations (ignored)."""
-    task: Literal["block_push", "peg_insertion"]
-    """The real task (its plane and tool orientation: kinematics.TASK_PLANES)."""
+    task: str
+    """The real task (:mod:`lfdt.tasks`; the arms' plane and tool orientation for it: kinematics.TASK_PLANES)."""
     control_period_s: Annotated[float, Field(gt=0)] = 0.1
     """Time from one command to the next observation (the twin's control_dt)."""
     max_lost_frames: Annotated[int, Field(ge=0)] = 5
@@ -151,6 +151,10 @@ class RigConfig(_Model):
 
     @model_validator(mode="after")
     def _geometry(self) -> RigConfig:
+        if self.task not in tasks.NAMES or self.task not in kinematics.TASK_PLANES:
+            known = [t for t in tasks.NAMES if t in kinematics.TASK_PLANES]
+            raise ValueError(f"task: {self.task!r} is not a real-robot task the arms are set up for; expected one "
+                             f"of {known}")
         plane = kinematics.TASK_PLANES[self.task]
         f = plane.fixed_axis
         for name, arm in self.arms.items():
@@ -244,8 +248,7 @@ def load_rig_config(path: str | Path) -> RigConfig:
 
 def example_rig_config(task: str = "block_push") -> dict:
     """A documented example configuration (a JSON-ready dict) with the world frame placed like the twin's."""
-    if task not in TASKS:
-        raise ValueError(f"unknown task {task!r}; expected one of {TASKS}")
+    tasks.get(task)  # an unknown task fails here, naming the known ones
     notes = {
         "world frame": "the table frame, mm here, m in recordings; place it like the twin's: block_push: x to "
                        "Robot2's side, y away from the robots (the block's line at goal_line_m), z up; "
@@ -261,20 +264,7 @@ def example_rig_config(task: str = "block_push") -> dict:
         "control_period_s": "command -> next observation; the twin uses 0.1 s",
         "max_lost_frames": "frames without the needed tags before both arms are stopped",
     }
-    if task == "block_push":
-        # yaw 90: the arm's forward (base x) is world +y; its flange plane z = 100 mm sweeps y 95..175 mm
-        r1 = {"port": "/dev/ttyUSB0", "base": {"x_mm": -60.0, "y_mm": -55.0, "z_mm": 0.0, "yaw_deg": 90.0},
-              "workspace_min_mm": [140.0, -50.0, 90.0], "workspace_max_mm": [240.0, 90.0, 110.0]}
-        r2 = {"port": "/dev/ttyUSB1", "base": {"x_mm": 60.0, "y_mm": -55.0, "z_mm": 0.0, "yaw_deg": 90.0},
-              "workspace_min_mm": [140.0, -90.0, 90.0], "workspace_max_mm": [240.0, 50.0, 110.0]}
-        table = {"x_mm": 0.0, "y_mm": 300.0, "z_mm": 0.0}
-        extra: dict[str, Any] = {"goal_line_m": 0.20}
-    else:
-        # tools point along their base +x: Robot2 (peg) faces +x, Robot1 (receptacle) faces -x (yaw 180)
-        r1 = {"host": "192.168.1.11", "base": {"x_mm": 305.0, "y_mm": 0.0, "z_mm": -15.0, "yaw_deg": 180.0}}
-        r2 = {"host": "192.168.1.12", "base": {"x_mm": -275.0, "y_mm": 0.0, "z_mm": -15.0, "yaw_deg": 0.0}}
-        table = {"x_mm": 0.0, "y_mm": 150.0, "z_mm": 150.0, "roll_deg": 90.0}  # upright, facing the camera
-        extra = {}
+    r1, r2, table, extra = tasks.get(task).example_rig()
     for arm in (r1, r2):
         arm.update({"speed": 30, "max_step_deg": 15.0})
     return {"_notes": notes, "task": task, "control_period_s": 0.1, "max_lost_frames": 5,

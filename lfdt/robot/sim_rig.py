@@ -13,16 +13,17 @@ from lfdt.robot.rig_config import HUMAN_DRIVERS
 
 
 class SimRig(Rig):
-    """The same interface over :class:`~lfdt.robot.twin.TwinEnv`, for dry runs and tests.
+    """The same interface over :class:`~lfdt.twin.env.TwinEnv`, for dry runs and tests.
 
-    In an X domain the human slot is driven by the twin's scripted person (``human="scripted"``, the human part of
-    :class:`~lfdt.robot.twin.ScriptedDemo`) or by random targets held for 1..hold_max steps (``"random"``, as
-    ``twin.record_random`` moves it). ``step_delay`` sleeps after each step, to pace a dry run like the robots.
+    In an X domain the human slot is driven by the twin's scripted person (``human="scripted"``, the person of
+    :class:`~lfdt.twin.programs.TwinDemonstrator`) or moves to the relative target the caller offers with each
+    step (``"random"``: :func:`lfdt.robot.recording.record_random_episode` draws it). ``step_delay`` sleeps after
+    each step, to pace a dry run like the robots.
     """
 
     def __init__(self, task: str, domain: str, seed: int = 0, human: str = "scripted", step_delay: float = 0.0,
-                 max_steps: int | None = None, reach: float = 0.008, hold_max: int = 3) -> None:
-        from lfdt.robot.twin import TwinConfig, TwinEnv
+                 max_steps: int | None = None) -> None:
+        from lfdt.twin.env import TwinConfig, TwinEnv
 
         self._init_slots(task, domain)
         if human not in HUMAN_DRIVERS:
@@ -30,7 +31,7 @@ class SimRig(Rig):
         cfg = TwinConfig() if max_steps is None else TwinConfig(max_steps=max_steps)
         self.env = TwinEnv(task, domain, cfg)
         self.control_dt = cfg.control_dt
-        self.human, self.step_delay, self.reach, self.hold_max = human, step_delay, reach, hold_max
+        self.human, self.step_delay = human, step_delay
         self._seeds = np.random.default_rng(seed)
         self._obs: np.ndarray | None = None
         self._info: dict = {}
@@ -39,15 +40,13 @@ class SimRig(Rig):
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset the twin (``seed``: its start state; None: drawn from the rig's seed)."""
-        from lfdt.robot.twin import ScriptedDemo
+        from lfdt.twin.programs import TwinDemonstrator
 
         if seed is None:
             seed = int(self._seeds.integers(2**31))
         self._obs, self._info = self.env.reset(seed=seed)
         self._over = False
-        self._demo = ScriptedDemo(self.env) if self.human_slot is not None and self.human == "scripted" else None
-        self._human_rng = np.random.default_rng(seed)
-        self._hold = 0
+        self._demo = TwinDemonstrator(self.env) if self.human_slot is not None and self.human == "scripted" else None
         return self._obs.copy()
 
     def observe(self) -> np.ndarray:
@@ -56,24 +55,22 @@ class SimRig(Rig):
             raise RuntimeError("reset() the rig first")
         return self._obs.copy()
 
-    def _human_target(self, obs: np.ndarray) -> np.ndarray:
-        s = self.human_slot
-        if self._demo is not None:
-            return self._demo(obs).reshape(2, 2)[s]
-        if self._hold == 0:
-            self._human_rel = self._human_rng.uniform(-self.reach, self.reach, size=2)
-            self._hold = int(self._human_rng.integers(1, self.hold_max + 1))
-        self._hold -= 1
-        return self._human_rel
-
-    def act(self, relative_targets: Mapping[str, Any]) -> None:
-        """One twin step: the robots' relative targets, the human slot from its driver."""
+    def act(self, relative_targets: Mapping[str, Any], human_target: Any = None) -> None:
+        """One twin step: the robots' relative targets; the human slot from the scripted person, or (``"random"``)
+        to ``human_target``, its target relative to the hand (m, 2 numbers)."""
         targets = self._targets(relative_targets)
         obs = self.observe()
         action = np.zeros((2, 2))
         for slot, arm in enumerate(self.slots):
             if arm == "h":
-                self._human_rel = np.asarray(self._human_target(obs), dtype=float)
+                if self._demo is not None:
+                    rel = self._demo(obs).reshape(2, 2)[slot]
+                elif human_target is None:
+                    raise ValueError("SimRig(human='random') moves the person to the human_target act() is given; "
+                                     "none was")
+                else:
+                    rel = np.asarray(human_target, dtype=float).reshape(2)
+                self._human_rel = np.asarray(rel, dtype=float)
                 action[slot] = self._human_rel
             else:
                 action[slot] = targets[arm]
@@ -83,7 +80,7 @@ class SimRig(Rig):
             time.sleep(self.step_delay)
 
     def human_action(self, obs: np.ndarray, next_obs: np.ndarray) -> np.ndarray:
-        """The human slot's commanded relative target of the last step (as ``twin.record_random`` records it)."""
+        """The human slot's commanded relative target of the last step."""
         if self.human_slot is None:
             raise ValueError(f"domain {self.domain} has no human")
         return self._human_rel.copy()

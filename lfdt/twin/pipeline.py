@@ -17,18 +17,97 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import torch
 
-from lfdt import bc, data, layout, translation
+from lfdt import bc, data, layout, tasks, translation
 from lfdt.config import TwinParams
 from lfdt.dynamics import fit_dynamics, load_random_y
 from lfdt.nets import save_state
-from lfdt.robot import twin
+from lfdt.twin import METHODS
+from lfdt.twin.env import TwinConfig, TwinEnv
 
-METHODS = ("bc_no_translation", "lfdt")
-PAPER_REAL = {"block_push": {"lfdt": (10, 10), "bc_no_translation": (10, 10)},
-              "peg_insertion": {"lfdt": (8, 10), "bc_no_translation": (2, 10)}}
-"""The paper's real-robot results (successes, trials)."""
+
+def twin_schema(task: str, domain: str, kind: str, metadata: dict):
+    """The Parquet schema of twin and robot recordings (the same conventions as the simulated experiment's data):
+    'random' records both slots' relative targets, 'demos' only the robot's."""
+    tl = tasks.get(task).layout
+    if kind == "random":
+        actions = tl.action_columns(domain)
+    else:
+        actions = tl.arm_action_columns(layout.robot_arm(domain))
+    return data.transitions_schema(tl.state_columns(domain), actions, metadata={
+        "kind": kind, "task": task, "domain": domain, "layout": tl.describe(), **metadata})
+
+
+def record_random(task: str, domain: str, samples: int, episode_steps: int, seed: int, out_dir,
+                  hold_max: int = 3, reach: float = 0.008) -> int:
+    """Random motion in the twin: every slot's target a random offset of up to ``reach`` m from its end (about
+    one control step of travel, so that the motion still tells which target was sent), held 1..hold_max steps;
+    one file per episode. Returns the number of transitions written."""
+    from lfdt.robot.recording import EpisodeRecorder, record_random_episode
+    from lfdt.robot.sim_rig import SimRig
+    from lfdt.seeding import episode_seed
+
+    with SimRig(task, domain, human="random") as rig:
+        rec = EpisodeRecorder(out_dir, twin_schema(task, domain, "random", {"seed": seed, "samples": samples}),
+                              rig.control_dt)
+        written, ep = 0, 0
+        while written < samples:
+            s = episode_seed("random", seed, domain, ep)
+            rig.reset(seed=s)
+            rec.start()
+            written += record_random_episode(rig, rec, np.random.default_rng(s), min(episode_steps, samples - written),
+                                             reach, hold_max)
+            ep += 1
+    return written
+
+
+def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, max_attempts: int = 200) -> dict:
+    """Demonstrations in X in the twin (the robot programmed, the scripted person adapting); only successful ones
+    are kept."""
+    from lfdt.robot.recording import EpisodeRecorder, record_demo_episode
+    from lfdt.robot.sim_rig import SimRig
+    from lfdt.seeding import episode_seed
+    from lfdt.twin.programs import ProgrammedMotion
+
+    robot = layout.robot_arm(pairing)
+    with SimRig(task, pairing, human="scripted") as rig:
+        slot = rig.slots.index(robot)
+        rec = EpisodeRecorder(out_dir, twin_schema(task, pairing, "demos", {"seed": seed, "demos": n}),
+                              rig.control_dt)
+        kept, attempts, lengths = 0, 0, []
+        while kept < n:
+            if attempts >= max_attempts:
+                raise RuntimeError(f"{task} {pairing}: {kept} successful demonstrations in {attempts} attempts")
+            obs = rig.reset(seed=episode_seed("demos", seed, pairing, attempts))
+            rec.start()
+            program = ProgrammedMotion(task, slot, obs, rig.control_dt)
+            ok, steps = record_demo_episode(rig, rec, program, robot, rig.env.cfg.max_steps)
+            attempts += 1
+            if ok:
+                lengths.append(steps)
+                rec.finish()
+                kept += 1
+            else:
+                rec.abort()
+    return {"demonstrations": kept, "attempts": attempts, "mean_length": float(np.mean(lengths)),
+            "transitions": int(np.sum(lengths))}
+
+
+def evaluate_policy(task: str, policy, trials: int, cfg: TwinConfig | None = None, purpose: str = "evaluation",
+                    videos: int = 0, video_dir=None) -> list[dict]:
+    """Trials of a policy in the twin's domain Y from fixed start states; per-trial success and the task's
+    measures."""
+    from lfdt.evaluation import rollout_trials
+
+    def make_env(record: bool) -> TwinEnv:
+        return TwinEnv(task, "Y", cfg, render_mode="rgb_array" if record else None)
+
+    results = rollout_trials(policy, make_env, trials, videos, video_dir, purpose=purpose)
+    for r in results:
+        r.update({k: v for k, v in r.pop("final_info").items() if k != "is_success"})
+    return results
 
 
 def recordings(task: str, seed: int, root: str | Path = "data/twin") -> dict[str, Path]:
@@ -59,12 +138,12 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path = "data/t
                                         f"`python -m lfdt.robot {command}`")
             shutil.copytree(src, path)
         elif name.startswith("random"):
-            twin.record_random(task, name.split("_")[1], p.random_samples, p.random_episode_steps, seed, path,
-                               hold_max=p.random_hold_max)
+            record_random(task, name.split("_")[1], p.random_samples, p.random_episode_steps, seed, path,
+                          hold_max=p.random_hold_max)
         else:
-            stats[name] = twin.record_demos(task, name.split("_")[1], p.demos_per_pairing, seed, path)
+            stats[name] = record_demos(task, name.split("_")[1], p.demos_per_pairing, seed, path)
         kind, domain = name.split("_")
-        data.check_transitions(path, kind, domain, twin.LAYOUTS[task])
+        data.check_transitions(path, kind, domain, tasks.get(task).layout)
         df = data.read_transitions(path)
         stats.setdefault(name, {}).update({"transitions": len(df), "episodes": int(df.episode_index.nunique())})
     return stats
@@ -74,7 +153,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
           log: Callable[[dict, int], None] | None = None) -> dict:
     """Fit F, F^-1, the translator, BC on the translation (lfdt) and BC on the raw demonstrations, all with one
     seed, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
-    tl = twin.LAYOUTS[task]
+    tl = tasks.get(task).layout
     rec = recordings(task, seed, root)
     models_dir = Path(models_dir)
     ry = load_random_y(rec["random_Y"], tl)
@@ -92,27 +171,28 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     tr, tstats = translation.train_translator(train_demos, random_x, ry.y, dyn, cfg, seed=seed,
                                               std_floor=p.dynamics.std_floor, log=log, tl=tl, held_out=held)
     save_state(tr, models_dir / "translator.pt", {"translator": cfg.model_dump(), "task": task, "seed": seed})
-    dt = twin.TwinConfig().control_dt
+    dt = TwinConfig().control_dt
     translated = translation.translate_demos(tr, dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
     diag = translation.translation_diagnostics(translated, demo_paths, episodes, tl)
     raw = {pr: data.read_transitions(path) for pr, path in demo_paths.items()}
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
            "translator": {"wall_time_s": tstats["wall_time_s"], **tstats["final"], **diag}}
     for method in METHODS:
-        tasks = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
+        members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         members = []
-        for t in tasks:
+        for t in members_data:
             m, st = bc.train_member(t, p.bc, seed)
             members.append(m)
             out[f"bc/{method}/{t.name}"] = {k: v for k, v in st.items() if k != "curve"}
         bc.BCPolicy(members, tl, action_bounds=None).save(models_dir / method, {
-            "method": method, "task": task, "seed": seed, "bc": p.bc.model_dump(), "members": [t.name for t in tasks]})
+            "method": method, "task": task, "seed": seed, "bc": p.bc.model_dump(),
+            "members": [t.name for t in members_data]})
     return out
 
 
 def load_policy(task: str, method: str, models_dir: str | Path) -> bc.BCPolicy:
     """A trained twin policy (target end positions of both robots from the Y state)."""
-    policy, _ = bc.BCPolicy.load(Path(models_dir) / method, twin.LAYOUTS[task], action_bounds=None)
+    policy, _ = bc.BCPolicy.load(Path(models_dir) / method, tasks.get(task).layout, action_bounds=None)
     return policy
 
 
@@ -125,7 +205,7 @@ def evaluate(task: str, p: TwinParams, models_dir: str | Path, video_root: str |
             for method in METHODS:
                 policy = load_policy(task, method, Path(models_dir) / f"s{seed}")
                 vdir = Path(video_root) / f"{task}-{method}" if video_root and seed == p.seeds[0] else None
-                for r in twin.evaluate(task, policy, p.trials, videos=p.videos if vdir else 0, video_dir=vdir):
+                for r in evaluate_policy(task, policy, p.trials, videos=p.videos if vdir else 0, video_dir=vdir):
                     rows.append({"task": task, "method": method, "seed": seed, "trial": r["trial"],
                                  "success": bool(r["success"]), "steps": r["steps"], "start_seed": r["seed"]})
     return rows
