@@ -26,8 +26,8 @@ from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
 from lfdt.robot.calibration import calibration_from_intrinsics, save_calibration
 from lfdt.robot.cli import METHODS, TASKS, build_parser, main
-from lfdt.robot.real_rig import RealRig
-from lfdt.robot.recording import read_recording
+from lfdt.robot.real_rig import CLIP_MARGIN_MM, RealRig
+from lfdt.robot.recording import EpisodeRecorder, RecordingMismatch, read_recording, record_random_episode
 from lfdt.robot.rig_config import (
     RigConfigError,
     example_rig_config,
@@ -405,9 +405,68 @@ def test_targets_outside_the_workspace_are_clipped_by_default(camera_files) -> N
             rig.observe()
             rig.act({"r1": [0.035, 0.0], "r2": [0.0, 0.0]})
         flange = kinematics.position(sim.angles)
-        assert flange[1] == pytest.approx(-50.0, abs=0.1) and flange[2] == pytest.approx(100.0, abs=0.1)
+        # clipped CLIP_MARGIN_MM inside the edge, so that the arm never rests where the safety box refuses it
+        assert flange[1] == pytest.approx(-50.0 + CLIP_MARGIN_MM, abs=0.1)
+        assert flange[2] == pytest.approx(100.0, abs=0.1)
     finally:
         rig.close()
+
+
+def test_random_recording_on_the_example_rig_completes(camera_files, tmp_path) -> None:
+    """Random targets run into the workspace's edges; clipped inside them, no command or reset is refused there
+    (clipped onto the edge itself, the first episode used to end with 'y = -50.0 mm below the workspace minimum
+    -50.0 mm' and the next reset was refused)."""
+    home = kinematics.home_angles("block_push")
+    cfg = _config(camera_files, {}, control_period_s=0.001, reset_settle_s=0.5)
+    rig = RealRig(cfg, "Y", arms={"r1": SimArm(home), "r2": SimArm(home)}, tracker=_StillTracker())
+    rec = EpisodeRecorder(tmp_path / "random_Y", twin_pipeline.twin_schema("block_push", "Y", "random", {}), 0.1)
+    try:
+        for ep in range(4):
+            rig.reset(seed=ep)
+            rec.start()
+            record_random_episode(rig, rec, np.random.default_rng(ep), 30, 0.008, 3)
+    finally:
+        rig.close()
+    assert len(read_recording(tmp_path / "random_Y")) == 4 * 30
+
+
+def test_a_recording_folder_holds_one_domain_and_task(tmp_path, capsys) -> None:
+    out = tmp_path / "rec"
+    EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "Y", "random", {}), 0.1)
+    EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "Y", "random", {"seed": 1}), 0.1)  # same: resumes
+    with pytest.raises(RecordingMismatch, match=r"holds a recording of domain 'Y', not 'R1H'"):
+        EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "R1H", "random", {}), 0.1)
+    with pytest.raises(RecordingMismatch, match=r"task 'block_push', not 'peg_insertion'"):
+        EpisodeRecorder(out, twin_pipeline.twin_schema("peg_insertion", "Y", "random", {}), 0.1)
+    args = ["record-random", "--sim", "--task", "block_push", "--domain", "HR2", "--episodes", "1", "--steps", "2",
+            "--out", str(out)]
+    assert main(args) == 2
+    assert "holds a recording of domain 'Y', not 'HR2'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["record-random", "--domain", "Y", "--episodes", "-3", "--steps", "2"], "--episodes: -3 is not a positive count"),
+    (["record-random", "--domain", "Y", "--episodes", "1", "--steps", "0"], "--steps: 0 is not a positive count"),
+    (["record-random", "--domain", "Y", "--episodes", "1", "--steps", "2", "--reach", "inf"],
+     "--reach: inf is not a positive finite number"),
+    (["record-demos", "--pairing", "R1H", "--episodes", "2", "--max-attempts", "0"],
+     "--max-attempts: 0 is not a positive count"),
+    (["deploy", "--task", "block_push", "--method", "lfdt", "--models", "m", "--log", "l.csv", "--trials", "0"],
+     "--trials: 0 is not a positive count"),
+])
+def test_counts_are_checked_where_they_enter(argv, message, capsys) -> None:
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args([*argv, "--sim", "--out", "x"] if argv[0] != "deploy" else [*argv, "--sim"])
+    assert e.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_deploy_without_trained_models_names_the_folder(tmp_path, capsys) -> None:
+    args = ["deploy", "--sim", "--task", "block_push", "--method", "lfdt", "--models", str(tmp_path / "none"),
+            "--log", str(tmp_path / "log.csv"), "--trials", "1"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"--models {tmp_path / 'none'}: no trained lfdt policy" in err and "Traceback" not in err
+    assert not (tmp_path / "log.csv").exists()
 
 
 # ------------------------------------------------------------------------------------------------ calibrate

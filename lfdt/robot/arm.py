@@ -261,6 +261,11 @@ class SafetyLimits:
     dh: DH = field(default_factory=DH)
 
 
+EDGE_TOLERANCE_MM = 0.1
+"""A flange this little outside the workspace box counts as on its edge: the arms report angles in 0.01 deg steps,
+which moves the flange by up to ~0.05 mm per joint, and an arm resting on the edge must not be refused there."""
+
+
 def _fmt(x: float) -> str:
     return f"{x:g}"
 
@@ -286,10 +291,10 @@ def check_command(angles: Sequence[float], speed: int, limits: SafetyLimits = Sa
             raise SafetyError(f"J{j} = {a:.1f} deg outside [{_fmt(lo)}, {_fmt(hi)}]")
     p = position(values, limits.dh)
     for axis, v, lo, hi in zip("xyz", p, limits.workspace_min_mm, limits.workspace_max_mm):
-        if v < lo:
+        if v < lo - EDGE_TOLERANCE_MM:
             raise SafetyError(f"{axis} = {v:.1f} mm below the workspace minimum {lo:.1f} mm "
                               f"(flange at {_format_angles(values)} deg)")
-        if v > hi:
+        if v > hi + EDGE_TOLERANCE_MM:
             raise SafetyError(f"{axis} = {v:.1f} mm above the workspace maximum {hi:.1f} mm "
                               f"(flange at {_format_angles(values)} deg)")
     if current is not None and limits.max_step_deg is not None:

@@ -16,6 +16,7 @@ Exit code 2 also covers a refused target, lost tracking and an unusable rig conf
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -39,6 +40,36 @@ EXIT_INTERRUPTED = 130
 TASKS = tasks.NAMES
 METHODS = twin.METHODS
 
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a count of episodes, steps, attempts, trials, frames)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive count (>= 1)")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (a distance, a duration)."""
+    value = nonnegative_float(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
+    return value
+
 MOVE_LIMITS = SafetyLimits(max_step_deg=None)
 """``move``: joint limits, speed and the default workspace box (flange 40 mm or more above the mounting surface,
 within 350 mm sideways, 500 mm up), no step limit: a single move from wherever the arm is, which the firmware
@@ -57,7 +88,7 @@ def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--host", help="IP address of the arm's TCP server (myCobot 280 Pi / JN)")
     parser.add_argument("--netport", type=int, default=9000, help="TCP port of the arm's server (default: 9000)")
     parser.add_argument("--baudrate", type=int, default=115200, help="serial baud rate (default: 115200)")
-    parser.add_argument("--connect-timeout", type=float, default=3.0, metavar="S",
+    parser.add_argument("--connect-timeout", type=positive_float, default=3.0, metavar="S",
                         help="seconds to wait for the TCP connection (default: 3)")
 
 
@@ -134,13 +165,13 @@ def add_calibrate_parser(subparsers) -> None:
     p.add_argument("--camera", required=True, metavar="SRC", help="camera index (e.g. 0) or a video file")
     p.add_argument("--pattern", type=int, nargs=2, required=True, metavar=("COLS", "ROWS"),
                    help="chessboard: inner corners per row and column; with --charuco: squares")
-    p.add_argument("--square", type=float, required=True, metavar="M", help="square edge, metres")
+    p.add_argument("--square", type=positive_float, required=True, metavar="M", help="square edge, metres")
     p.add_argument("--charuco", action="store_true", help="the board is a ChArUco board (AprilTag 36h11 markers)")
-    p.add_argument("--marker", type=float, metavar="M", help="ChArUco marker edge, metres (with --charuco)")
-    p.add_argument("--frames", type=int, default=20, metavar="N", help="views to grab (default: 20)")
-    p.add_argument("--every", type=float, default=0.5, metavar="S",
+    p.add_argument("--marker", type=positive_float, metavar="M", help="ChArUco marker edge, metres (with --charuco)")
+    p.add_argument("--frames", type=positive_int, default=20, metavar="N", help="views to grab (default: 20)")
+    p.add_argument("--every", type=nonnegative_float, default=0.5, metavar="S",
                    help="seconds between grabbed views (camera time, or video time for a file; default: 0.5)")
-    p.add_argument("--min-views", type=int, default=6, metavar="N",
+    p.add_argument("--min-views", type=positive_int, default=6, metavar="N",
                    help="fewest views with the board needed to calibrate (default: 6)")
     p.add_argument("--out", required=True, type=Path, metavar="CALIB_JSON", help="calibration JSON to write")
     p.set_defaults(func=run_calibrate)
@@ -227,7 +258,7 @@ def add_rig_arguments(parser: argparse.ArgumentParser, task_required: bool = Fal
     parser.add_argument("--task", choices=TASKS, required=task_required,
                         help="the task (must match the rig's)" if task_required else
                         "task of the twin (with --sim and no --rig); otherwise the rig's")
-    parser.add_argument("--step-delay", type=float, default=0.0, metavar="S",
+    parser.add_argument("--step-delay", type=nonnegative_float, default=0.0, metavar="S",
                         help="--sim: sleep S seconds per step, to pace a dry run like the robots (default: 0)")
 
 
@@ -332,13 +363,14 @@ def add_record_random_parser(subparsers) -> None:
                                           "and numbering continues.")
     add_rig_arguments(p)
     p.add_argument("--domain", required=True, choices=("Y", "R1H", "HR2"))
-    p.add_argument("--episodes", type=int, required=True, metavar="N", help="episodes to record")
-    p.add_argument("--steps", type=int, required=True, metavar="T", help="control steps per episode")
+    p.add_argument("--episodes", type=positive_int, required=True, metavar="N", help="episodes to record")
+    p.add_argument("--steps", type=positive_int, required=True, metavar="T", help="control steps per episode")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
-    p.add_argument("--reach", type=float, default=0.008, metavar="M",
+    p.add_argument("--reach", type=positive_float, default=0.008, metavar="M",
                    help="largest random offset per axis, metres (default: 0.008)")
-    p.add_argument("--hold-max", type=int, default=3, metavar="K", help="hold a target 1..K steps (default: 3)")
+    p.add_argument("--hold-max", type=positive_int, default=3, metavar="K",
+                   help="hold a target 1..K steps (default: 3)")
     p.add_argument("--human", choices=("random", "scripted"), default="random",
                    help="--sim in R1H/HR2: how the twin's person moves (default: random)")
     p.add_argument("--yes", action="store_true", help="robots: start each episode without waiting for Enter")
@@ -385,11 +417,12 @@ def add_record_demos_parser(subparsers) -> None:
                                           "the others dropped.")
     add_rig_arguments(p)
     p.add_argument("--pairing", required=True, choices=("R1H", "HR2"))
-    p.add_argument("--episodes", type=int, required=True, metavar="N", help="successful demonstrations to keep")
+    p.add_argument("--episodes", type=positive_int, required=True, metavar="N",
+                   help="successful demonstrations to keep")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
-    p.add_argument("--steps", type=int, default=40, metavar="T",
+    p.add_argument("--steps", type=positive_int, default=40, metavar="T",
                    help="longest episode, control steps (default: 40, the twin's episode)")
-    p.add_argument("--max-attempts", type=int, metavar="M", help="give up after M attempts (default: 5 N)")
+    p.add_argument("--max-attempts", type=positive_int, metavar="M", help="give up after M attempts (default: 5 N)")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
     p.add_argument("--yes", action="store_true", help="robots: keep every episode, do not ask or wait for Enter")
     p.set_defaults(func=run_record_demos)
@@ -407,7 +440,7 @@ def run_record_demos(args: argparse.Namespace) -> int:
     rig = _make_rig(args, task, config, args.pairing, "scripted", args.seed, max_steps=args.steps)
     robot = layout.robot_arm(args.pairing)
     slot = rig.slots.index(robot)
-    max_attempts = args.max_attempts or 5 * args.episodes
+    max_attempts = 5 * args.episodes if args.max_attempts is None else args.max_attempts
     meta = _metadata(args, config, seed=args.seed, steps=args.steps)
     rec = EpisodeRecorder(args.out, twin_schema(task, args.pairing, "demos", meta), rig.control_dt)
     goal_line = config.goal_line_m if config is not None and not args.sim else None
@@ -462,10 +495,10 @@ def add_deploy_parser(subparsers) -> None:
     p.add_argument("--method", required=True, choices=METHODS)
     p.add_argument("--models", required=True, type=Path, metavar="DIR",
                    help="trained models of one seed, e.g. models/twin/TASK/s0")
-    p.add_argument("--trials", type=int, required=True, metavar="N", help="trials to run")
+    p.add_argument("--trials", type=positive_int, required=True, metavar="N", help="trials to run")
     p.add_argument("--log", required=True, type=Path, metavar="CSV",
                    help="outcome log, e.g. data/real/TASK/deploy_METHOD.csv")
-    p.add_argument("--steps", type=int, default=40, metavar="T",
+    p.add_argument("--steps", type=positive_int, default=40, metavar="T",
                    help="longest trial, control steps (default: 40, the twin's episode)")
     p.set_defaults(func=run_deploy)
 
@@ -482,6 +515,11 @@ def run_deploy(args: argparse.Namespace) -> int:
         done = len(deploy_log.read_trials(args.log))
     except deploy_log.DeployLogError as e:
         print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    if not (args.models / args.method).is_dir():
+        print(f"error: --models {args.models}: no trained {args.method} policy in {args.models / args.method} (the "
+              f"twin_train stage writes models/twin/TASK/s<seed>/; with twin.backend: real after recording)",
+              file=sys.stderr)
         return EXIT_FAILED
     policy = load_policy(task, args.method, args.models)
     rig = _make_rig(args, task, config, "Y", "scripted", 0, max_steps=args.steps)
@@ -518,7 +556,7 @@ def run_deploy(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m lfdt.robot`` parser; add subcommands with an ``add_<name>_parser(subparsers)`` function."""
     parser = argparse.ArgumentParser(prog="python -m lfdt.robot",
-                                     description="Talk to the myCobot 280 arms (see lfdt-spec §5).")
+                                     description="Talk to the myCobot 280 arms (README: Real robot).")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_check_parser(subparsers)
     add_move_parser(subparsers)
@@ -532,15 +570,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments)."""
+    from lfdt.robot.recording import RecordingMismatch
     from lfdt.robot.rig_config import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except SafetyError as e:
-        print(f"refused: {e}; nothing was sent", file=sys.stderr)
+        print(f"refused: {e}; that command was not sent", file=sys.stderr)
         return EXIT_FAILED
-    except (ArmNotResponding, TrackingLost, RigConfigError) as e:
+    except (ArmNotResponding, TrackingLost, RigConfigError, RecordingMismatch) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_FAILED
     except EOFError:  # input() on a closed stdin: nobody to answer the operator's questions

@@ -16,6 +16,10 @@ from lfdt.robot.arm import SafeArm, SafetyError, TrackingLost, check_command
 from lfdt.robot.rig import Rig, _wrap, plane_angle
 from lfdt.robot.rig_config import RigConfig, RigConfigError, safety_limits, workspace_bounds
 
+CLIP_MARGIN_MM = 1.0
+"""Targets outside an arm's workspace are clipped this far inside its edges, so that IK and the arm's angle rounding
+never leave the flange on the wrong side of the safety box."""
+
 
 class RealRig(Rig):
     """The robots of a domain (R1H: r1, HR2: r2, Y: both) through SafeArm, and the AprilTag tracker."""
@@ -157,12 +161,12 @@ class RealRig(Rig):
         target_b = self.plane_point_in_base(name, target_w)
         free = [i for i in range(3) if i != self.plane.fixed_axis]
         lo, hi = self._bounds[name]
-        inside = np.clip(target_b[free], lo, hi)
-        if not np.allclose(inside, target_b[free]):
+        if np.any(target_b[free] < lo) or np.any(target_b[free] > hi):
             if not cfg.clip_to_workspace:
                 raise SafetyError(f"{name}: target {np.round(target_b, 1)} mm (base frame) is outside the "
                                   f"workspace {lo.round(1).tolist()}..{hi.round(1).tolist()} mm")
-            target_b[free] = inside
+            margin = np.minimum(CLIP_MARGIN_MM, (hi - lo) / 2)
+            target_b[free] = np.clip(target_b[free], lo + margin, hi - margin)
         try:
             q = kinematics.inverse(target_b, self.plane.tool_axis, angles, self.arms[name].limits.dh)
         except ValueError as e:

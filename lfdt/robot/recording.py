@@ -19,6 +19,12 @@ import pyarrow as pa
 from lfdt import data
 
 EPISODE_GLOB = "episode_*.parquet"
+IDENTITY = ("kind", "domain", "task")
+"""Metadata every episode of one recording folder shares."""
+
+
+class RecordingMismatch(ValueError):
+    """A recording folder that already holds another kind, domain or task."""
 
 
 class EpisodeRecorder:
@@ -30,9 +36,17 @@ class EpisodeRecorder:
         self.schema = schema
         self.dt = dt
         meta = self.dir / "_meta.json"
-        if not meta.exists():
+        mine = data.read_schema_metadata(schema)
+        if meta.exists():
+            theirs = json.loads(meta.read_text())
+            for key in IDENTITY:
+                if theirs.get(key) != mine.get(key):
+                    raise RecordingMismatch(f"{self.dir} holds a recording of {key} {theirs.get(key)!r}, not "
+                                            f"{mine.get(key)!r}: one folder holds one kind, domain and task (choose "
+                                            f"another --out)")
+        else:
             tmp = self.dir / "._meta.json.tmp"
-            tmp.write_text(json.dumps(data.read_schema_metadata(schema), indent=2))
+            tmp.write_text(json.dumps(mine, indent=2))
             os.replace(tmp, meta)
         self._rows: list[tuple] | None = None
 
