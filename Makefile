@@ -4,7 +4,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup reproduce test lint smoke benchmarks mlflow-ui clean-venv
+.PHONY: help setup reproduce test lint smoke benchmarks mlflow-ui clean-venv
+
+help:  ## list the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 14
 
 $(STAMP): requirements.txt pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,11 +25,16 @@ test: setup  ## unit tests and a smoke run of the whole DAG on tiny params
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc
 
-lint: setup
+smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a temporary copy (most of `make test`)
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q tests/test_pipeline_smoke.py
+
+lint: setup  ## ruff
 	$(BIN)/ruff check lfdt stages tests benchmarks
 
-benchmarks: setup  ## throughput ratios (numbers go into the README)
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/collect_throughput.py
+benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/results/, numbers in the README)
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/collect_throughput.py
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/training_throughput.py
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/parallel_speedup.py
 
 mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000
 	$(BIN)/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000

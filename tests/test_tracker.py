@@ -2,7 +2,8 @@
 
 Synthetic images are rendered by warping an OpenCV-generated AprilTag 36h11 marker (with a white quiet
 zone) through the homography given by a known K and pose, at 4x supersampling then area-downsampled, with
-mild noise. Real photos are the duckietown/lib-dt-apriltags test files in /work/shared/data/apriltag-photos.
+mild noise. Real photos are the duckietown/lib-dt-apriltags test files in tests/data/apriltag-photos (licence
+beside them).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from lfdt.robot.tracker import (
     yaw_of_normal,
 )
 
-PHOTOS = Path("/work/shared/data/apriltag-photos")
+PHOTOS = Path(__file__).parent / "data" / "apriltag-photos"
 W, H = 1280, 720
 K = np.array([[910.0, 0.0, 641.3], [0.0, 908.0, 362.7], [0.0, 0.0, 1.0]])
 TAG = 0.065
@@ -252,10 +253,15 @@ def test_rotation_helpers() -> None:
 # ------------------------------------------------------------------------------------------ real photos
 
 
+def _photo(name: str) -> np.ndarray:
+    """A test photo; a missing or unreadable one fails the test (cv2.imread would return None)."""
+    img = cv2.imread(str(PHOTOS / name))
+    assert img is not None, f"test photo {PHOTOS / name} is missing or unreadable"
+    return img
+
+
 @pytest.fixture(scope="module")
 def photo_info() -> dict:
-    if not (PHOTOS / "test_info.yaml").exists():
-        pytest.skip("real AprilTag photos not available")
     with open(PHOTOS / "test_info.yaml") as f:
         return yaml.safe_load(f)
 
@@ -265,7 +271,7 @@ def test_real_rotation_photos(photo_info: dict) -> None:
     trk = AprilTagTracker(np.asarray(info["K"]).reshape(3, 3), None, tag_size_m=info["tag_size"])
     labels, yaws, dists, depths = [], [], [], []
     for name in info["files"]:
-        img = cv2.imread(str(PHOTOS / name))
+        img = _photo(name)
         assert img.shape[:2] == (info["height"], info["width"])
         dets = trk.detect(img)
         assert {d.id for d in dets} <= {76}, f"{name}: {[d.id for d in dets]}"
@@ -298,7 +304,7 @@ def test_real_multi_tag_photos(photo_info: dict) -> None:
     trk = AprilTagTracker(np.asarray(info["K"]).reshape(3, 3), None, tag_size_m=info["tag_size"])
     found = {}
     for name in info["files"]:
-        dets = trk.detect(cv2.imread(str(PHOTOS / name)))
+        dets = trk.detect(_photo(name))
         ids = [d.id for d in dets]
         found[name] = ids
         assert len(ids) == len(set(ids)), f"{name}: duplicate ids {ids}"
@@ -312,7 +318,7 @@ def test_real_multi_tag_photos(photo_info: dict) -> None:
 def test_real_sample_photo(photo_info: dict) -> None:
     info = photo_info["sample_test"]
     trk = AprilTagTracker(np.asarray(info["K"]).reshape(3, 3), None, tag_size_m=info["tag_size"])
-    dets = trk.detect(cv2.imread(str(PHOTOS / info["file"])))
+    dets = trk.detect(_photo(info["file"]))
     assert len(dets) >= 1
     assert all(0 <= d.id < 587 for d in dets)  # 36h11 has 587 codes
 

@@ -1,7 +1,7 @@
 """A fake myCobot 280 speaking the real serial/TCP frame protocol, for tests and dry runs without hardware.
 
 Frames are ``FE FE LEN CMD payload FA`` with ``LEN = len(payload) + 2``; values are big-endian int16,
-angles in degrees x 100, x/y/z in mm x 10 (lfdt-spec §5). The peer answers the way pymycobot 4.0's
+angles in degrees x 100, x/y/z in mm x 10 (pymycobot's encoding). The peer answers the way pymycobot 4.0's
 ``MyCobot280`` / ``MyCobot280Socket`` parse replies:
 
 * GET_ANGLES (0x20) / GET_COORDS (0x23): 12 bytes (six int16);

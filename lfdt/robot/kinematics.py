@@ -1,7 +1,7 @@
 """Forward and inverse kinematics of the myCobot 280 (6 revolute joints), in millimetres and degrees.
 
 Standard Denavit-Hartenberg parameters after Elephant Robotics' published table (d1, a2, a3, d4, d5, d6);
-the defaults are the URDF link offsets (lfdt-spec §5) and should be calibrated on a real arm (the
+the defaults are the published URDF link offsets and should be calibrated on a real arm (the
 published d4 differs between sources: 63.4 / 64.62 / 66.39 mm). The inverse kinematics is our own:
 damped least squares on position and tool orientation, warm-started from the current angles, inside
 the joint limits. Each task fixes the tool orientation and moves the tool in one plane:
