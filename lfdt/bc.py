@@ -26,7 +26,7 @@ from torch import nn
 from lfdt import layout, methods
 from lfdt.config import BCConfig
 from lfdt.layout import BOX_PUSH, TaskLayout
-from lfdt.nets import Normalizer, load_state, mlp, read_config, save_state
+from lfdt.nets import Normalizer, check_finite, load_state, mlp, read_config, save_state
 
 
 class BCMember(nn.Module):
@@ -114,7 +114,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        running += loss.item()
+        running += check_finite(loss.item(), "the BC loss", it)
         if progress is not None:
             progress.update(1)
         if it % cfg.eval_every == 0 or it == cfg.iterations:

@@ -12,6 +12,8 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from lfdt import layout
+
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
 PosInt = Annotated[int, Field(gt=0)]
@@ -23,7 +25,8 @@ PosXY = Annotated[list[PosFloat], Field(min_length=2, max_length=2)]
 class Strict(BaseModel):
     """Base: unknown keys are errors, field docstrings become descriptions."""
 
-    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True, frozen=True, strict=True)
+    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True, frozen=True, strict=True,
+                              allow_inf_nan=False)
 
 
 class ArmConfig(Strict):
@@ -139,6 +142,16 @@ class EnvConfig(Strict):
     """Success thresholds."""
     reward: RewardConfig = RewardConfig()
     """Expert reward."""
+
+    @model_validator(mode="after")
+    def _joint_counts(self) -> EnvConfig:
+        # every data file, network and translator is laid out for these joint counts (lfdt.layout)
+        for name, arm in (("robot", "r1"), ("human", "h")):
+            want = layout.ARM_JOINTS[arm]
+            if len(getattr(self, name).links) != want:
+                raise ValueError(f"{name}.links has {len(getattr(self, name).links)} links; the state layout "
+                                 f"(lfdt/layout.py ARM_JOINTS) is built for {want}")
+        return self
 
 
 class ExpertsConfig(Strict):
@@ -448,10 +461,13 @@ class TwinParams(Strict):
     """The real-robot tasks (paper §IV-E) on the MuJoCo twin (backend 'sim') or from recordings made on the
     robots with ``python -m lfdt.robot`` (backend 'real'), with the paper's real-experiment sizes."""
 
+    tasks: list[str] = Field(default=["block_push", "peg_insertion"], min_length=1)
+    """The real-robot tasks to run (lfdt/tasks; with the robots, only those you recorded)."""
     backend: Literal["sim", "real"] = "sim"
     """'sim': generate data and evaluate in the twin; 'real': read recordings and deployment logs from real_dir."""
     real_dir: str = "data/real"
-    """Where `python -m lfdt.robot record-random/record-demos/deploy` wrote their files (backend 'real')."""
+    """Where `python -m lfdt.robot record-random/record-demos/deploy` wrote their files (backend 'real'; a DVC
+    dependency of the twin stages, so new recordings or trials rerun what they feed)."""
     random_samples: PosInt = 3_300
     """Random-motion samples per domain (the paper: 3300)."""
     random_episode_steps: PosInt = 30
@@ -479,6 +495,10 @@ class TwinParams(Strict):
     def _learned_kinematics(self) -> TwinParams:
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds has duplicates: {self.seeds}")
+        # names are checked by the twin stages against lfdt.tasks (importing it here would make every stage
+        # depend on the twin's task modules)
+        if len(set(self.tasks)) != len(self.tasks):
+            raise ValueError(f"tasks has duplicates: {self.tasks}")
         if self.translator.kinematics != "learned":
             raise ValueError(f"translator.kinematics = {self.translator.kinematics!r}: the twin's states are end "
                              "positions with no joint angles, so G must output them ('learned')")
@@ -528,7 +548,12 @@ def _format_errors(err: ValidationError) -> str:
     for e in err.errors():
         key = ".".join(str(p) for p in e["loc"] if p != "") or "(top level)"
         value = e.get("input")
-        lines.append(f"  {key} = {value!r}: {e['msg']}")
+        msg = e["msg"].removeprefix("Value error, ")
+        if isinstance(value, dict):  # a whole section: the message says what is wrong in it
+            lines.append(f"  {key}: {msg}")
+            continue
+        shown = repr(value)
+        lines.append(f"  {key} = {shown if len(shown) <= 80 else shown[:77] + '...'}: {msg}")
     return "invalid params:\n" + "\n".join(lines)
 
 

@@ -25,6 +25,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from lfdt import layout
+from lfdt.errors import StageError
+from lfdt.files import temp_path
 
 META_KEY = b"lfdt"
 INDEX_COLUMNS = ("episode_index", "frame_index", "timestamp")
@@ -99,8 +101,7 @@ def transitions_table(schema: pa.Schema, episode_index: np.ndarray, frame_index:
 def write_table(table: pa.Table, path: str | Path) -> Path:
     """Write a Parquet file atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     pq.write_table(table, tmp, compression="zstd")
     os.replace(tmp, path)
     return path
@@ -131,14 +132,56 @@ def read_metadata(path: str | Path) -> dict:
     return read_schema_metadata(schema)
 
 
-def read_transitions(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
-    """Read a transitions file, or a directory of per-episode files, (optionally some columns) into a DataFrame."""
+class DataFileError(StageError, ValueError):
+    """A data file that cannot be read, or is not the kind, domain or task its reader needs; names the file."""
+
+
+def _read_table(path: Path, columns: list[str] | None) -> pa.Table:
+    try:
+        return pq.read_table(path, columns=columns)
+    except FileNotFoundError:
+        raise
+    except (pa.ArrowException, OSError) as e:
+        raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
+
+
+def check_identity(path: str | Path, kind: str | None = None, domain: str | None = None,
+                   task: str | None = None) -> dict:
+    """Check what a data file (or recording directory) holds, by its metadata; returns the metadata.
+
+    ``kind``: 'random', 'demos', 'translated', 'executed'; ``domain``: 'Y', 'R1H', 'HR2'; ``task``: the task's name
+    (files of the simulated box push written before tasks were named carry none: they count as 'box_push').
+    """
+    try:
+        meta = read_metadata(path)
+    except FileNotFoundError:
+        raise
+    except (pa.ArrowException, OSError) as e:
+        raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
+    except ValueError as e:
+        raise DataFileError(str(e)) from None
+    have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", layout.BOX_PUSH.name)}
+    want = {"kind": kind, "domain": domain, "task": task}
+    wrong = [f"{k} {have[k]!r} where {v!r} is needed" for k, v in want.items() if v is not None and have[k] != v]
+    if wrong:
+        raise DataFileError(f"{path} holds {have['kind']} data of domain {have['domain']} ({', '.join(wrong)})")
+    return meta
+
+
+def read_transitions(path: str | Path, columns: list[str] | None = None, *, kind: str | None = None,
+                     domain: str | None = None, task: str | None = None) -> pd.DataFrame:
+    """Read a transitions file, or a directory of per-episode files, (optionally some columns) into a DataFrame.
+
+    ``kind``, ``domain``, ``task``: what the file must hold (:func:`check_identity`), checked before reading.
+    """
+    if kind is not None or domain is not None or task is not None:
+        check_identity(path, kind, domain, task)
     if Path(path).is_dir():
         files = sorted(Path(path).glob("*.parquet"))
         if not files:
             raise FileNotFoundError(f"no Parquet files in {path}")
-        return pd.concat([pq.read_table(f, columns=columns).to_pandas() for f in files], ignore_index=True)
-    return pq.read_table(path, columns=columns).to_pandas()
+        return pd.concat([_read_table(f, columns).to_pandas() for f in files], ignore_index=True)
+    return _read_table(Path(path), columns).to_pandas()
 
 
 def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> list[str]:
@@ -187,7 +230,7 @@ def demo_subset(path: str | Path, n: int, seed: int, purpose_key: str) -> list[i
     The draw depends only on (seed, purpose_key, the file's episodes), so translation and BC of the same
     seed use the same subset. ``n`` equal to the number available takes them all.
     """
-    episodes = np.unique(read_transitions(path, columns=["episode_index"]).episode_index.to_numpy())
+    episodes = np.unique(read_transitions(path, columns=["episode_index"], kind="demos").episode_index.to_numpy())
     if n > len(episodes):
         raise ValueError(f"{n} demonstrations asked for (grid.demos) but {path} holds only {len(episodes)} "
                          f"(demos.per_pairing)")

@@ -26,7 +26,7 @@ from torch import nn
 from lfdt import data, layout
 from lfdt.config import DynamicsConfig
 from lfdt.layout import BOX_PUSH, TaskLayout
-from lfdt.nets import Normalizer, batches, mlp
+from lfdt.nets import Normalizer, batches, check_finite, mlp
 
 
 class DynamicsModels(nn.Module):
@@ -63,7 +63,7 @@ class RandomY:
 def load_random_y(path, tl: TaskLayout = BOX_PUSH) -> RandomY:
     """Read Y's random-motion transitions (a file or a recording directory) into arrays, columns by name."""
     cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
-    df = data.read_transitions(path)
+    df = data.read_transitions(path, kind="random", domain="Y", task=tl.name)
     return RandomY(
         y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
         a=df[[layout.ACTION_PREFIX + c for c in acts]].to_numpy(np.float32, copy=True),
@@ -141,8 +141,8 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
         opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         opt_g.step()
-        run_f += loss_f.item()
-        run_g += loss_g.item()
+        run_f += check_finite(loss_f.item(), "F's loss", it)
+        run_g += check_finite(loss_g.item(), "F^-1's loss", it)
         if progress is not None:
             progress.update(1)
         if it % cfg.eval_every == 0 or it == cfg.iterations:

@@ -105,8 +105,9 @@ class Checkpoints:
             return None
         return path
 
-    def save(self, model: SAC) -> Path:
-        """Write a checkpoint, then point ``latest.json`` at it (atomic), then drop older ones."""
+    def save(self, model: SAC, curve: list[dict] | None = None) -> Path:
+        """Write a checkpoint (with the learning curve so far), then point ``latest.json`` at it (atomic), then drop
+        older ones."""
         name = f"step-{model.num_timesteps:09d}"
         tmp = self.root / f".{name}.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
@@ -121,6 +122,7 @@ class Checkpoints:
         buf = model.replay_buffer
         np.savez(tmp / "replay_buffer.npz", pos=buf.pos, full=buf.full,
                  **{f: getattr(buf, f) for f in _BUFFER_FIELDS})
+        (tmp / "curve.json").write_text(json.dumps(curve or []))
         final = self.root / name
         shutil.rmtree(final, ignore_errors=True)
         os.replace(tmp, final)
@@ -132,8 +134,9 @@ class Checkpoints:
                 shutil.rmtree(old, ignore_errors=True)
         return final
 
-    def load(self, model: SAC, path: Path) -> None:
-        """Restore parameters, optimiser states, entropy coefficient, counters and replay buffer."""
+    def load(self, model: SAC, path: Path) -> list[dict]:
+        """Restore parameters, optimiser states, entropy coefficient, counters and replay buffer; returns the
+        learning curve up to the checkpoint."""
         ckpt = torch.load(path / "params.pt", weights_only=True)
         model.set_parameters(ckpt["params"], exact_match=True)
         with torch.no_grad():
@@ -147,6 +150,8 @@ class Checkpoints:
                 getattr(buf, f)[...] = z[f]
             buf.pos = int(z["pos"])
             buf.full = bool(z["full"])
+        curve = path / "curve.json"
+        return json.loads(curve.read_text()) if curve.exists() else []
 
     def clear(self) -> None:
         """Remove every checkpoint (after the final model is safely written)."""
@@ -208,7 +213,7 @@ class TrainingCallback(BaseCallback):
                 self.progress.set_postfix(success=f"{point['train/success_rate_last100']:.2f}")
         if n >= self._next_ckpt:
             self._next_ckpt += self.cfg.checkpoint_every
-            self.checkpoints.save(self.model)
+            self.checkpoints.save(self.model, self.curve)
         return True
 
 
@@ -220,14 +225,15 @@ def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg
     venv = make_vec_env(pairing, env_cfg, demos_cfg, cfg.n_envs, cfg.seed)
     model = build_sac(venv, cfg)
     checkpoints = Checkpoints(checkpoint_dir, config_hash(pairing, env_cfg, cfg, demos_cfg))
-    resumed_from = 0
+    resumed_from, curve = 0, []
     latest = checkpoints.latest()
     if latest is not None:
-        checkpoints.load(model, latest)
+        curve = checkpoints.load(model, latest)
         resumed_from = model.num_timesteps
     if progress is not None:
         progress.update(resumed_from)
     callback = TrainingCallback(cfg, checkpoints, log, progress)
+    callback.curve = curve  # the points before the interruption stay in the curve
     t0 = time.perf_counter()
     updates0 = model._n_updates
     remaining = cfg.total_timesteps - model.num_timesteps

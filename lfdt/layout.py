@@ -86,7 +86,7 @@ class TaskLayout:
     """The column layout of one task: state columns per arm, action columns per arm, object columns.
 
     Domains and slots are shared by every task (:data:`DOMAIN_ARMS`); the box push of the simulated
-    experiment is :data:`BOX_PUSH`, the real-robot twin's tasks live in :mod:`lfdt.robot.twin`.
+    experiment is :data:`BOX_PUSH`, the real-robot tasks' layouts come from :mod:`lfdt.tasks`.
     """
 
     def __init__(self, name: str, arm_cols: dict[str, list[str]], action_cols: dict[str, list[str]],

@@ -13,13 +13,21 @@ import contextlib
 import fcntl
 import json
 import os
+import socket
 import subprocess
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from lfdt.errors import StageError
+from lfdt.files import process_alive
+
 EXPERIMENT_ENV = "LFDT_MLFLOW_EXPERIMENT"
+EXPERIMENT_KIND_TAG, EXPERIMENT_KIND = "mlflow.experimentKind", "custom_model_development"
+"""The experiment's kind for MLflow's UI: model training, so that it opens on the runs table."""
+PROBE_TIMEOUT_S = 5.0
+"""How long a tracking server may take to answer the first request before the stage stops."""
 DEFAULT_EXPERIMENT = "lfdt"
 _BATCH = 900  # MLflow accepts at most 1000 metrics per log_batch call
 
@@ -53,14 +61,46 @@ def tracking_uri() -> str:
     return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{workspace_root() / 'mlflow.db'}"
 
 
+class TrackingUnavailable(StageError):
+    """The tracking server named by MLFLOW_TRACKING_URI does not answer."""
+
+
+def check_reachable(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
+    """For an http(s) tracking URI, one request to the server's /health with a timeout: TrackingUnavailable names
+    the URI when nothing answers (MLflow's own client would retry for minutes before failing)."""
+    import urllib.error
+    import urllib.request
+
+    if not uri.startswith(("http://", "https://")):
+        return
+    try:
+        urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=timeout).close()
+    except urllib.error.HTTPError:
+        return  # something answers (a proxy or another server version): let MLflow's client take it from here
+    except (urllib.error.URLError, OSError) as e:
+        reason = getattr(e, "reason", e)
+        raise TrackingUnavailable(f"the MLflow tracking server MLFLOW_TRACKING_URI={uri} does not answer within "
+                                  f"{timeout:g} s ({reason}); start it, or unset MLFLOW_TRACKING_URI to use "
+                                  f"{workspace_root() / 'mlflow.db'}") from None
+
+
+OUTPUT_PATHS = ("reports", "dvc.lock")
+"""Tracked files the pipeline itself rewrites (metrics, plots, the lock): they do not make a commit 'dirty' (DVC
+deletes a stage's outputs before it runs, so every run would look dirty)."""
+
+
 def git_commit(root: Path | None = None) -> str:
-    """The checked-out commit (with '-dirty' when the tree has changes), or 'unknown'."""
+    """The checked-out commit (with '-dirty' when tracked files other than the pipeline's outputs differ from it),
+    or 'unknown'."""
     try:
         cwd = root or project_root()
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
                              check=True, timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=cwd, capture_output=True, text=True,
+                             check=True, timeout=10).stdout.strip()
+        excluded = [f":(exclude){p}" for p in OUTPUT_PATHS]
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".", *excluded],
+                               cwd=top, capture_output=True, text=True, timeout=10).stdout.strip()
         return sha + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -121,24 +161,27 @@ def experiment_id(name: str | None = None) -> str:
 
     name = name or os.environ.get(EXPERIMENT_ENV, DEFAULT_EXPERIMENT)
     uri = tracking_uri()
+    check_reachable(uri)
     mlflow.set_tracking_uri(uri)
     lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
         client = mlflow.MlflowClient()
         exp = client.get_experiment_by_name(name)
-        if exp is not None:
-            return exp.experiment_id
-        # a local store keeps artifacts beside the database, whatever directory a stage runs from
-        artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None
-        try:
-            return client.create_experiment(name, artifact_location=artifacts)
-        except MlflowException:
-            # another process (e.g. on a tracking server) created it between our two calls
+        if exp is None:
+            # a local store keeps artifacts beside the database, whatever directory a stage runs from
+            artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None
+            try:
+                client.create_experiment(name, artifact_location=artifacts)
+            except MlflowException:
+                pass  # another process (e.g. on a tracking server) created it between our two calls
             exp = client.get_experiment_by_name(name)
             if exp is None:
-                raise
-            return exp.experiment_id
+                raise MlflowException(f"could not create or find the MLflow experiment {name!r} at {uri}")
+        if exp.tags.get(EXPERIMENT_KIND_TAG) != EXPERIMENT_KIND:
+            # without it MLflow 3's UI opens an experiment on its GenAI overview (traces), not on its runs
+            _retry(lambda: client.set_experiment_tag(exp.experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND))
+        return exp.experiment_id
 
 
 class Tracker:
@@ -213,6 +256,8 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
     if parent_run_id:
         all_tags["mlflow.parentRunId"] = parent_run_id
     client = mlflow.MlflowClient()
+    mark_killed_runs(client, exp, run_name or stage)
+    all_tags.update({"lfdt.host": socket.gethostname(), "lfdt.pid": os.getpid()})
     run = _retry(lambda: client.create_run(exp, run_name=run_name or stage))
     tracker = Tracker(run.info.run_id)
     status = "FAILED"
@@ -226,6 +271,30 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
             tracker.flush()
         finally:
             _retry(lambda: client.set_terminated(run.info.run_id, status=status))
+
+
+def mark_killed_runs(client, experiment: str, run_name: str) -> list[str]:
+    """Runs named ``run_name`` still RUNNING whose process on this host is gone (a stage killed before it could
+    end its run) are marked KILLED; returns their ids."""
+    host = socket.gethostname()
+    runs = _retry(lambda: client.search_runs([experiment], filter_string=(
+        f"attributes.run_name = '{run_name}' and attributes.status = 'RUNNING'"), max_results=100))
+    killed = []
+    for run in runs:
+        tags = run.data.tags
+        if tags.get("lfdt.host") != host or not tags.get("lfdt.pid", "").isdigit():
+            continue
+        pid = int(tags["lfdt.pid"])
+        if pid == os.getpid() or not process_alive(pid):
+            _retry(lambda r=run.info.run_id: client.set_terminated(r, status="KILLED"))
+            killed.append(run.info.run_id)
+    return killed
+
+
+def pipeline_run_name(kind: str) -> str:
+    """A parent run's name: what was run (``kind``), the commit, and the DVC experiment when there is one."""
+    exp = os.environ.get("DVC_EXP_NAME")
+    return f"{kind} {git_commit()[:7]}" + (f" {exp}" if exp else "")
 
 
 def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
+
+from lfdt.errors import StageError
 
 
 def mlp(in_dim: int, out_dim: int, hidden: list[int], slope: float = 0.2) -> nn.Sequential:
@@ -74,3 +77,15 @@ def read_config(path: str | Path) -> dict:
 def batches(n: int, batch_size: int, generator: torch.Generator) -> torch.Tensor:
     """Indices of one random minibatch (sampling with replacement across iterations)."""
     return torch.randint(0, n, (batch_size,), generator=generator)
+
+
+class TrainingDiverged(StageError):
+    """A loss became NaN or infinite: the run stops there instead of finishing on garbage."""
+
+
+def check_finite(value: float, what: str, iteration: int) -> float:
+    """``value`` if finite; otherwise TrainingDiverged naming the loss and the iteration."""
+    if not math.isfinite(value):
+        raise TrainingDiverged(f"{what} is {value} at iteration {iteration}: training diverged (lower its "
+                               f"learning_rate, or look for NaN or infinite values in its input data)")
+    return value

@@ -13,6 +13,8 @@ from typing import Any
 from tqdm import tqdm
 
 from lfdt.config import Params, ParamsError, load_params
+from lfdt.errors import StageError
+from lfdt.files import temp_path
 
 
 def params(path: str | Path = "params.yaml") -> Params:
@@ -21,10 +23,11 @@ def params(path: str | Path = "params.yaml") -> Params:
 
 
 def main(fn: Callable[[], None]) -> None:
-    """Run a stage's main; a params problem exits 2 with its message, anything else raises (non-zero exit)."""
+    """Run a stage's main; a params problem or a :class:`~lfdt.errors.StageError` (a wrong data file, an unreachable
+    tracking server, a diverged training) exits 2 with its message; anything else raises (non-zero exit)."""
     try:
         fn()
-    except ParamsError as err:
+    except (ParamsError, StageError) as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
 
@@ -32,8 +35,7 @@ def main(fn: Callable[[], None]) -> None:
 def write_json(path: str | Path, obj: Any) -> Path:
     """Write JSON atomically (small metrics files)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     tmp.write_text(json.dumps(obj, indent=2, sort_keys=False) + "\n")
     os.replace(tmp, path)
     return path
@@ -45,8 +47,7 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
     intervals)."""
     rows = list(rows)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     with open(tmp, "w", newline="") as fh:
         if rows:
             w = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)), restval="")

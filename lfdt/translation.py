@@ -36,7 +36,7 @@ from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.envs import BoxPushEnv
 from lfdt.layout import BOX_PUSH, TaskLayout
-from lfdt.nets import Normalizer, mlp
+from lfdt.nets import Normalizer, check_finite, mlp
 
 PAIRING_INDEX = {p: i for i, p in enumerate(layout.PAIRINGS)}
 
@@ -122,14 +122,14 @@ class Transitions:
 
 
 def load_x_transitions(path, pairing: str, episodes: list[int] | None = None,
-                       tl: TaskLayout = BOX_PUSH, with_actions: bool = False) -> Transitions:
-    """State pairs of an X dataset (random or demos), canonical column order, optionally some episodes only;
-    ``with_actions`` also reads the real robot's recorded action (for diagnostics)."""
+                       tl: TaskLayout = BOX_PUSH, with_actions: bool = False, *, kind: str) -> Transitions:
+    """State pairs of an X dataset (``kind`` 'random' or 'demos', checked), canonical column order, optionally some
+    episodes only; ``with_actions`` also reads the real robot's recorded action (for diagnostics)."""
     cols = tl.canonical_x_columns(pairing)
     a_cols = [layout.ACTION_PREFIX + c for c in tl.arm_action_columns(layout.robot_arm(pairing))]
     names = ["episode_index", "frame_index"] + [layout.STATE_PREFIX + c for c in cols] + \
         [layout.NEXT_STATE_PREFIX + c for c in cols] + (a_cols if with_actions else [])
-    df = data.read_transitions(path, columns=names)
+    df = data.read_transitions(path, columns=names, kind=kind, domain=pairing, task=tl.name)
     if episodes is not None:
         df = df[df.episode_index.isin(episodes)]
     df = df.sort_values(["episode_index", "frame_index"], kind="stable")
@@ -484,6 +484,8 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         opt_g.step()
+        check_finite(float(loss), "the translator's G loss", it)
+        check_finite(float(l_d), "the translator's D loss", it)
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
         for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", out["dyn"]), ("loss/id", out["id"]),
@@ -587,7 +589,7 @@ def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, s
     ep_out = 0
     for pairing, path in demos_path.items():
         cols = tl.canonical_x_columns(pairing)
-        df = data.read_transitions(path)
+        df = data.read_transitions(path, kind="demos", domain=pairing, task=tl.name)
         df = df[df.episode_index.isin(episodes[pairing])]
         robot = layout.robot_arm(pairing)
         for src_ep, g in df.groupby("episode_index", sort=True):
@@ -672,7 +674,7 @@ def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episod
     out: dict[str, list[float]] = {"robot_ee_error_m": [], "box_position_error_m": [], "box_yaw_error_rad": [],
                                    "missing_robot_ee_to_hand_m": []}
     for pairing, path in demos_path.items():
-        src = data.read_transitions(path)
+        src = data.read_transitions(path, kind="demos", domain=pairing, task=tl.name)
         src = src[src.episode_index.isin(episodes[pairing])].sort_values(["episode_index", "frame_index"])
         tr = df[df.source_pairing == pairing].sort_values(["source_episode_index", "frame_index"])
         robot = layout.robot_arm(pairing)

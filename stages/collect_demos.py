@@ -23,7 +23,7 @@ def run() -> None:
     out = Path("data/demos") / f"{args.pairing}.parquet"
     with mlflow_runs.stage_run("collect_demos", {"env": p.env.model_dump(), "demos": cfg.model_dump()},
                             tags={"pairing": args.pairing, "seed": cfg.seed, "protocol": cfg.protocol},
-                            run_name=f"collect_demos-{args.pairing}") as run:
+                            run_name=f"{args.pairing} collect_demos") as run:
         with stage.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
         data.write_table(table, out)

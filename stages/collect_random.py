@@ -16,7 +16,7 @@ def run() -> None:
     out = Path("data/random") / f"{args.domain}.parquet"
     with mlflow_runs.stage_run("collect_random", {"env": p.env.model_dump(), "random": cfg.model_dump()},
                             tags={"domain": args.domain, "seed": cfg.seed},
-                            run_name=f"collect_random-{args.domain}") as run:
+                            run_name=f"{args.domain} collect_random") as run:
         with stage.progress(cfg.transitions, f"random {args.domain}", "tr") as bar:
             table, stats = random_motion.collect_random(args.domain, p.env, cfg, progress=bar.update)
         data.write_table(table, out)

@@ -50,7 +50,7 @@ def run() -> None:
                 if s.get("mlflow_run_id"):
                     children.append(s["mlflow_run_id"])
     with mlflow_runs.stage_run("report", {"grid": p.grid.model_dump()}, tags={"pipeline_parent": "true"},
-                            run_name="pipeline") as parent:
+                            run_name=mlflow_runs.pipeline_run_name("pipeline")) as parent:
         parent.metrics({k.replace("/", "_"): v for k, v in summary.items()})
         for f in ("table1.md", "table1.csv", "table1.tex", "table1_runs.csv", "translator_diagnostics.csv",
                   "stage_times.csv"):

@@ -19,7 +19,8 @@ def run() -> None:
             path = common.DEMOS / f"{pairing}.parquet"
             episodes = data.demo_subset(path, args.demos, cfg.seed, pairing)
             table = pq.read_table(path)
-            keep = data.read_transitions(path, columns=["episode_index"]).episode_index.isin(episodes).to_numpy()
+            keep = data.read_transitions(path, columns=["episode_index"], kind="demos",
+                                         domain=pairing).episode_index.isin(episodes).to_numpy()
             data.write_table(table.filter(keep), cfg.dir(common.BC_DATA) / f"raw_{pairing}.parquet")
 
 

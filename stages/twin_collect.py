@@ -11,7 +11,7 @@ def run() -> None:
     p = all_params.twin
     with mlflow_runs.stage_run("twin_collect", {"twin": p.model_dump()},
                             tags={"task": task, "seeds": ",".join(map(str, p.seeds)), "backend": p.backend},
-                            run_name=f"twin_collect-{task}") as run:
+                            run_name=f"{task} twin_collect") as run:
         stats = twin_pipeline.collect(task, p)
         flat = {f"{s}/{k}/{kk}": vv for s, per in stats.items() for k, v in per.items() for kk, vv in v.items()
                 if isinstance(vv, int | float)}

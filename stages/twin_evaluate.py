@@ -25,7 +25,7 @@ def run() -> None:
     p = all_params.twin
     with mlflow_runs.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
                             tags={"task": task, "backend": p.backend},
-                            run_name=f"twin_evaluate-{task}") as run:
+                            run_name=f"{task} twin_evaluate") as run:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:

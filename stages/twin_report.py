@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfdt import methods, stage, tasks, twin
+from lfdt import methods, mlflow_runs, stage, twin
 from lfdt.evaluation import seed_state_interval, wilson_interval
 
 
@@ -30,7 +30,7 @@ def run() -> None:
     lines += [f"# Real-robot tasks ({source})", "",
               "| task | method | ours | successes | per seed | 95 % interval | paper (real robots) |",
               "| --- | --- | --- | --- | --- | --- | --- |"]
-    for task in tasks.NAMES:
+    for task in p.tasks:
         ev = json.loads(Path(f"reports/twin/{task}_eval.json").read_text())
         rows += [{k: r[k] for k in ("task", "method", "seed", "trial", "success")} for r in ev["per_trial"]]
         for method in twin.METHODS:
@@ -50,6 +50,19 @@ def run() -> None:
               "random. Paper: Kobayashi et al. 2023, §IV-E (10 trials on the real robots)."]
     stage.write_csv("reports/twin_runs.csv", rows)
     Path("reports/twin.md").write_text("\n".join(lines) + "\n")
+    # one parent run for the twin: it carries the report and adopts the runs behind it
+    children = []
+    for task in p.tasks:
+        for kind in ("data", "train", "eval"):
+            rep = json.loads(Path(f"reports/twin/{task}_{kind}.json").read_text())
+            children += [rep["mlflow_run_id"]] if "mlflow_run_id" in rep else []
+            children += [s["mlflow_run_id"] for s in rep.get("seeds", {}).values() if "mlflow_run_id" in s]
+    params = {"twin": {"seeds": p.seeds, "trials": p.trials, "backend": p.backend}}
+    with mlflow_runs.stage_run("twin_report", params, tags={"pipeline_parent": "true"},
+                               run_name=mlflow_runs.pipeline_run_name("twin")) as parent:
+        parent.artifact(Path("reports/twin.md"))
+        parent.artifact(Path("reports/twin_runs.csv"))
+        mlflow_runs.adopt_children(parent.run_id, children)
     print("\n".join(lines))
 
 

@@ -13,7 +13,7 @@ def run() -> None:
     per_seed = {}
     for seed in p.seeds:
         with mlflow_runs.stage_run("twin_train", params, tags={"task": task, "seed": seed},
-                                   run_name=f"twin_train-{task}-s{seed}") as run:
+                                   run_name=f"{task}-s{seed} twin_train") as run:
             res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", log=lambda m, i, r=run:
                                       r.metrics({f"translator/{k}": v for k, v in m.items()}, i))
             run.metrics({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()

@@ -47,6 +47,9 @@ def test_params_yaml_is_what_the_schema_renders():
     ({"demos": {"deterministic": "yes"}}, "demos.deterministic", "'yes'"),
     ({"random": {"amplitude": 1.5}}, "random.amplitude", "1.5"),
     ({"experts": {"seed": 12}}, "experts.seed", "12"),
+    ({"env": {"timestep": float("inf")}}, "env.timestep", "inf"),
+    ({"translator": {"lambda_dyn": float("nan")}}, "translator.lambda_dyn", "nan"),
+    ({"env": {"box": {"mass": float("-inf")}}}, "env.box.mass", "-inf"),
 ])
 def test_bad_values_name_key_and_value(raw, key, value):
     with pytest.raises(ParamsError) as err:
@@ -61,6 +64,17 @@ def test_cross_field_checks():
     with pytest.raises(ParamsError, match="gears has 2 entries but links has 3"):
         validate_params({"env": {"robot": {"links": [0.1, 0.1, 0.1], "gears": [1, 1], "damping": [1, 1, 1],
                                            "joint_range": [1, 1, 1]}}})
+
+
+def test_impossible_shapes_and_section_errors_are_short():
+    four = {"links": [0.1] * 4, "gears": [1.0] * 4, "damping": [1.0] * 4, "joint_range": [1.0] * 4}
+    with pytest.raises(ParamsError, match=r"robot.links has 4 links; the state layout .* is built for 3"):
+        validate_params({"env": {"robot": four}})
+    with pytest.raises(ParamsError) as err:
+        validate_params({"env": {"robot": {"links": [0.1, 0.1, 0.1], "gears": [1, 1], "damping": [1, 1, 1],
+                                           "joint_range": [1, 1, 1]}}})
+    # the section's error names the section and the reason, not the section's whole contents
+    assert str(err.value) == "invalid params:\n  env.robot: gears has 2 entries but links has 3"
 
 
 def test_grid_cannot_ask_for_more_demos_than_collected():

@@ -1,5 +1,6 @@
 """SAC expert training: resumable after a kill, saved as a state dict with its config, demos with schema."""
 
+import csv
 import json
 import os
 import signal
@@ -102,6 +103,11 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "reports/experts/R1H_train.json").read_text())
     assert report["resumed_from_timesteps"] == stopped_at
+    # the learning curve keeps its points from before the kill (every log_every = 200 steps, once each)
+    with open(tmp_path / "reports/experts/R1H_curve.csv") as fh:
+        steps = [int(r["timesteps"]) for r in csv.DictReader(fh)]
+    assert steps == sorted(set(steps)) and min(steps) < stopped_at and max(steps) >= 2_800
+    assert len(steps) == 3_000 // TINY.log_every
     for pairing in ("R1H", "HR2"):
         report = json.loads((tmp_path / f"reports/experts/{pairing}_train.json").read_text())
         assert report["timesteps"] == 3_000

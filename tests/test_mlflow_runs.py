@@ -58,3 +58,70 @@ def test_two_stages_starting_at_once_share_one_experiment(tmp_path):
     client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
     exp = client.get_experiment_by_name("lfdt")
     assert len(client.search_runs([exp.experiment_id])) == 3
+
+
+def test_unreachable_tracking_server_is_a_clear_error_within_seconds(tmp_path):
+    import socket
+    import time
+    from pathlib import Path
+
+    with socket.socket() as s:  # a port on 127.0.0.1 where nothing listens
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    root = Path(__file__).resolve().parents[1]
+    env = {"PATH": "/usr/bin:/bin", "MLFLOW_TRACKING_URI": f"http://127.0.0.1:{port}", "HOME": str(tmp_path)}
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, str(root / "stages" / "fit_dynamics.py")], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=120)
+    took = time.monotonic() - t0
+    assert out.returncode == 2, out.stderr[-2000:]
+    assert f"MLFLOW_TRACKING_URI=http://127.0.0.1:{port} does not answer" in out.stderr
+    assert "Traceback" not in out.stderr and took < 15, took
+
+
+def test_a_killed_stage_run_is_marked_killed_when_the_stage_next_starts(tmp_path, monkeypatch):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    script = textwrap.dedent(f"""
+        import os
+        os.environ["MLFLOW_TRACKING_URI"] = {uri!r}
+        from lfdt import mlflow_runs
+        with mlflow_runs.stage_run("victim", {{}}, run_name="victim-s0") as run:
+            print(run.run_id, flush=True)
+            os.kill(os.getpid(), 9)
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    dead_id = out.stdout.strip()
+    client = mlflow.MlflowClient(uri)
+    assert client.get_run(dead_id).info.status == "RUNNING"  # nobody ended it
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    with mlflow_runs.stage_run("victim", {}, run_name="victim-s0") as run:
+        new_id = run.run_id
+    assert client.get_run(dead_id).info.status == "KILLED"
+    assert client.get_run(new_id).info.status == "FINISHED"
+
+
+def test_temp_files_of_a_killed_writer_are_removed_on_the_next_write(tmp_path):
+    from lfdt import stage
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = tmp_path / f".m.json.tmp-{ended.stdout.strip()}"  # what a writer killed mid-write leaves behind
+    dead.write_text("half")
+    stage.write_json(tmp_path / "m.json", {"a": 1})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json"]
+
+
+def test_commit_is_dirty_only_when_source_differs(tmp_path):
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    for name in ("dvc.yaml", "lfdt/a.py", "reports/m.json", "dvc.lock"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("1\n")
+    git("add", ".")
+    git("-c", "user.email=t@t", "-c", "user.name=t", "commit", "-qm", "init")
+    (tmp_path / "reports/m.json").unlink()  # DVC removes a stage's outputs before running it
+    (tmp_path / "dvc.lock").write_text("2\n")
+    assert not mlflow_runs.git_commit(tmp_path).endswith("-dirty")
+    (tmp_path / "lfdt/a.py").write_text("2\n")
+    assert mlflow_runs.git_commit(tmp_path).endswith("-dirty")

@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -179,6 +180,10 @@ def _post(url: str, body: dict) -> dict:
         return json.loads(r.read())
 
 
+def _tag(run: dict, key: str) -> str | None:
+    return {t["key"]: t["value"] for t in run["data"].get("tags", [])}.get(key)
+
+
 def test_mlflow_server_serves_the_pipeline_runs(project):
     dst, _ = project
     port = _free_port()
@@ -199,6 +204,10 @@ def test_mlflow_server_serves_the_pipeline_runs(project):
                 time.sleep(0.5)
         ids = [e["experiment_id"] for e in exp["experiments"] if e["name"] == "lfdt"]
         assert ids, exp
+        # a model-training experiment: MLflow's UI opens it on its runs table
+        lfdt_exp = next(e for e in exp["experiments"] if e["name"] == "lfdt")
+        assert {t["key"]: t["value"] for t in lfdt_exp.get("tags", [])}["mlflow.experimentKind"] == \
+            "custom_model_development"
         runs = _post(f"{base}/runs/search", {"experiment_ids": ids, "max_results": 500})["runs"]
         by_stage = {}
         for r in runs:
@@ -213,6 +222,16 @@ def test_mlflow_server_serves_the_pipeline_runs(project):
             metrics = {m["key"] for m in r["data"]["metrics"]}
             assert {"method", "demos", "seed", "evaluation.trials"} <= params
             assert {"success_rate", "successes", "trials"} <= metrics
+            assert not {"demos", "seed"} & metrics  # identifiers are params, never metrics
+            name = r["info"]["run_name"]  # the distinguishing part first, as the UI truncates names
+            assert re.fullmatch(r"[a-z_]+-d\d+-s\d+ evaluate", name), name
+        parents = [r for r in by_stage["report"]]
+        assert parents and all(r["info"]["run_name"].startswith("pipeline ") for r in parents)
+        twin = by_stage["twin_report"]
+        assert twin and all(r["info"]["run_name"].startswith("twin ") for r in twin)
+        twin_children = [r for r in runs if {t["key"]: t["value"] for t in r["data"].get("tags", [])}
+                         .get("mlflow.parentRunId") == twin[-1]["info"]["run_id"]]
+        assert {_tag(r, "lfdt.stage") for r in twin_children} == {"twin_collect", "twin_train", "twin_evaluate"}
         tr = by_stage["train_translator"][0]
         url = f"{base}/metrics/get-history?run_id={tr['info']['run_id']}&metric_key=D/accuracy"
         with urllib.request.urlopen(url, timeout=10) as resp:

@@ -55,3 +55,26 @@ def test_collect_random_table(tmp_path):
     # reproducible
     again, _ = collect_random("HR2", CFG, cfg)
     assert again.equals(table)
+
+
+def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
+    cfg = RandomConfig(transitions=200, episode_steps=100, episodes_per_batch=2, threads=1)
+    table, _ = collect_random("R1H", CFG, cfg)
+    path = data.write_table(table, tmp_path / "R1H.parquet")
+    from lfdt import translation
+
+    # a random-motion file handed over as demonstrations is refused before anything trains on it
+    with pytest.raises(data.DataFileError, match=r"R1H.parquet holds random data of domain R1H \(kind 'random' "
+                                                 r"where 'demos' is needed\)"):
+        translation.load_x_transitions(path, "R1H", kind="demos")
+    with pytest.raises(data.DataFileError, match=r"domain 'R1H' where 'HR2' is needed"):
+        data.read_transitions(path, kind="random", domain="HR2")
+    with pytest.raises(data.DataFileError, match=r"task 'box_push' where 'block_push' is needed"):
+        data.read_transitions(path, task="block_push")
+    assert len(translation.load_x_transitions(path, "R1H", kind="random").x) == 200
+    # corrupted bytes: the error names the file
+    bad = tmp_path / "bad.parquet"
+    raw = path.read_bytes()
+    bad.write_bytes(raw[:200] + bytes(4000) + raw[4200:])
+    with pytest.raises(data.DataFileError, match=r"bad.parquet: not a readable Parquet file"):
+        data.read_transitions(bad)

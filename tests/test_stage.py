@@ -21,3 +21,21 @@ def test_write_json_is_atomic_and_readable(tmp_path):
 
     path = stage.write_json(tmp_path / "sub" / "m.json", {"a": 1})
     assert json.loads(path.read_text()) == {"a": 1} and not list(path.parent.glob(".*tmp*"))
+
+
+def test_a_diverging_loss_stops_training_with_a_clear_error():
+    import numpy as np
+    import pandas as pd
+    import pytest
+
+    from lfdt import bc
+    from lfdt.config import BCConfig
+    from lfdt.nets import TrainingDiverged
+
+    rng = np.random.default_rng(0)
+    frame = pd.DataFrame({"state.a": rng.normal(size=64), "state.b": rng.normal(size=64),
+                          "action.u": rng.normal(size=64), "episode_index": np.repeat(np.arange(8), 8)})
+    frame.loc[5, "action.u"] = np.nan  # one bad label poisons the loss
+    task = bc.BCTask("pi", ["a", "b"], ["u"], frame)
+    with pytest.raises(TrainingDiverged, match=r"the BC loss is nan at iteration \d+: training diverged"):
+        bc.train_member(task, BCConfig(hidden=[8], iterations=50, eval_every=10, batch_size=64), seed=0)

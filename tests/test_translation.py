@@ -48,7 +48,7 @@ def tiny(tmp_path_factory):
 
 def test_skips_put_hand_and_object_where_they_belong(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     tr = translation.Translator([16])
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True)
     torch.nn.init.zeros_(tr.G[-1].weight)
@@ -68,7 +68,7 @@ def test_skips_put_hand_and_object_where_they_belong(tiny):
 
 def test_identity_loss_pulls_the_real_robot_only(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            log_every=100, batch_size=32, kinematics="learned")
     tr, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
@@ -99,7 +99,7 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
     tr = translation.Translator([16], kinematics=kin)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
     y_cols = layout.state_columns("Y")
     from lfdt.envs import arm_specs, forward_kinematics
@@ -119,7 +119,7 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
 
 def test_held_out_split_and_checkpoint_selection(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     train, held = translation.split_held_out(random_x, 0.25, seed=0)
     for p in layout.PAIRINGS:
         assert not set(train[p].episode) & set(held[p].episode)
@@ -136,7 +136,7 @@ def test_held_out_split_and_checkpoint_selection(tiny):
 
 def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
                            lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
     _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
@@ -145,7 +145,7 @@ def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
 
 def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     tr = translation.Translator([16])
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
     x0, x, x2, pidx = translation._normalised(tr, random_x)
@@ -157,7 +157,7 @@ def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
 
 def test_forward_kinematics_needs_a_robot_model(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p) for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
     with pytest.raises(ValueError, match="needs the arms' kinematics"):
         translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
                                      TranslatorConfig(iterations=2), seed=0)

@@ -16,9 +16,9 @@ def bc_tasks(cfg: Config) -> list[bc.BCTask]:
     m = methods.get(cfg.method)
     src = cfg.dir(BC_DATA)
     if m.data == "raw":
-        return bc.tasks_for(cfg.method, raw_demos={pr: data.read_transitions(src / f"raw_{pr}.parquet")
-                                                   for pr in layout.PAIRINGS})
-    return bc.tasks_for(cfg.method, translated=data.read_transitions(src / DATA_FILE[m.data]))
+        return bc.tasks_for(cfg.method, raw_demos={pr: data.read_transitions(src / f"raw_{pr}.parquet", kind="demos",
+                                                                             domain=pr) for pr in layout.PAIRINGS})
+    return bc.tasks_for(cfg.method, translated=data.read_transitions(src / DATA_FILE[m.data], kind=m.data, domain="Y"))
 
 
 def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
@@ -29,7 +29,7 @@ def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
     torch.set_num_threads(bcfg.torch_threads)
     tasks = bc_tasks(cfg)
     with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
-                            run_name=f"train_bc-{cfg.name}") as run:
+                            run_name=f"{cfg.name} train_bc") as run:
         members, metrics, curves = [], {}, []
         for task in tasks:
             member, st = bc.train_member(task, bcfg, cfg.seed, log=run.metrics, progress=progress)

@@ -60,6 +60,11 @@ def configs(method: str, demos: int, seeds: list[int], params: str) -> list[Conf
     return [Config(method, demos, s, params) for s in seeds]
 
 
+IDENTIFIERS = frozenset({"demos", "seed"})
+"""Keys of a metrics dict that say which configuration it is: params and tags of the run, never metrics."""
+
+
 def numeric(d: dict) -> dict:
-    """The int and float entries of a metrics dict (what MLflow takes as metrics)."""
-    return {k: v for k, v in d.items() if isinstance(v, int | float) and not isinstance(v, bool)}
+    """The int and float entries of a metrics dict (what MLflow takes as metrics), identifiers left out."""
+    return {k: v for k, v in d.items()
+            if isinstance(v, int | float) and not isinstance(v, bool) and k not in IDENTIFIERS}

@@ -21,7 +21,7 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
     policy, _ = bc.BCPolicy.load(cfg.dir(POLICIES))
     tags = {**cfg.tags(), "domain": "Y"}
     with mlflow_runs.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
-                            run_name=f"evaluate-{cfg.name}") as run:
+                            run_name=f"{cfg.name} evaluate") as run:
         trials = evaluation.run_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(VIDEOS), ecfg.video_size,
                                        progress=progress, purpose=ecfg.start_states)
         ok = np.array([t["success"] for t in trials])

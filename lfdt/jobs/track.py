@@ -16,10 +16,10 @@ def track_job(cfg: Config, progress: Progress | None = None) -> dict:
     p = stage.params(cfg.params)
     m = methods.get(cfg.method)
     source = Config(m.translator, cfg.demos, cfg.seed, cfg.params)
-    df = data.read_transitions(source.dir(BC_DATA) / DATA_FILE["translated"])
+    df = data.read_transitions(source.dir(BC_DATA) / DATA_FILE["translated"], kind="translated", domain="Y")
     dyn = load_models(DYNAMICS) if p.track.controller == "inverse" else None
     with mlflow_runs.stage_run("track_demos", {"track": p.track.model_dump(), **cfg.tags()}, tags=cfg.tags(),
-                            run_name=f"track_demos-{cfg.name}") as run:
+                            run_name=f"{cfg.name} track_demos") as run:
         out, stats = reexecute.execute(df, p.env, p.track, dyn,
                                        progress=(lambda: progress.update(1)) if progress is not None else None)
         table = translation.translated_table(out, {

@@ -23,13 +23,15 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     dyn = load_models(DYNAMICS)
     demo_paths = {pr: DEMOS / f"{pr}.parquet" for pr in layout.PAIRINGS}
     episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
-    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], with_actions=True)
+    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], with_actions=True,
+                                                    kind="demos")
                  for pr in layout.PAIRINGS}
     demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
-    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr) for pr in layout.PAIRINGS}
+    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr, kind="random")
+                for pr in layout.PAIRINGS}
     y_random = load_random_y(RANDOM / "Y.parquet").y
     with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
-                            run_name=f"train_translator-{cfg.name}") as run:
+                            run_name=f"{cfg.name} train_translator") as run:
         tr, stats = translation.train_translator(demos, random_x, y_random, dyn, tcfg, seed=cfg.seed,
                                                  std_floor=p.dynamics.std_floor, log=run.metrics,
                                                  progress=progress, kinematics=kin, held_out=held)

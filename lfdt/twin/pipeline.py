@@ -162,10 +162,13 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     save_state(dyn, models_dir / "dynamics.pt", {"dynamics": dcfg.model_dump(), "task": task,
                                                  "state_columns": ry.state_columns})
     demo_paths = {pr: str(rec[f"demos_{pr}"]) for pr in layout.PAIRINGS}
-    episodes = {pr: sorted(data.read_transitions(path, columns=["episode_index"]).episode_index.unique().tolist())
+    episodes = {pr: sorted(data.read_transitions(path, columns=["episode_index"], kind="demos", domain=pr, task=task)
+                           .episode_index.unique().tolist())
                 for pr, path in demo_paths.items()}
-    demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl) for pr in layout.PAIRINGS}
-    random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl) for pr in layout.PAIRINGS}
+    demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl, kind="demos")
+             for pr in layout.PAIRINGS}
+    random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl, kind="random")
+                for pr in layout.PAIRINGS}
     cfg = translation.method_config("lfdt", p.translator)
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
     tr, tstats = translation.train_translator(train_demos, random_x, ry.y, dyn, cfg, seed=seed,
@@ -174,7 +177,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     dt = TwinConfig().control_dt
     translated = translation.translate_demos(tr, dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
     diag = translation.translation_diagnostics(translated, demo_paths, episodes, tl)
-    raw = {pr: data.read_transitions(path) for pr, path in demo_paths.items()}
+    raw = {pr: data.read_transitions(path, kind="demos", domain=pr, task=task) for pr, path in demo_paths.items()}
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
            "translator": {"wall_time_s": tstats["wall_time_s"], **tstats["final"], **diag}}
     for method in METHODS:

@@ -1,0 +1,6 @@
+"""Errors a stage reports as one line on stderr and exit code 2 (see :func:`lfdt.stage.main`), not as a traceback:
+each names the file, key or argument at fault."""
+
+
+class StageError(Exception):
+    """Base of the errors whose message says all a user needs."""
