@@ -44,7 +44,7 @@ def _merge(base: dict, over: dict) -> dict:
 def project(tmp_path_factory):
     """A copy of the project with the smoke params, after one full `dvc repro`."""
     dst = tmp_path_factory.mktemp("smoke")
-    for name in ("dvc.yaml", "lfdt", "stages"):
+    for name in ("dvc.yaml", "lfdt", "stages", "data/real"):  # data/real: the twin stages' robot-data dependency
         src = ROOT / name
         (shutil.copytree if src.is_dir() else shutil.copy)(src, dst / name)
     params = _merge(yaml.safe_load((ROOT / "params.yaml").read_text()),
