@@ -70,9 +70,13 @@ def test_unreachable_tracking_server_is_a_clear_error_within_seconds(tmp_path):
         port = s.getsockname()[1]
     root = Path(__file__).resolve().parents[1]
     env = {"PATH": "/usr/bin:/bin", "MLFLOW_TRACKING_URI": f"http://127.0.0.1:{port}", "HOME": str(tmp_path)}
+    # what every stage does first: open its tracking run, through stage.main
+    script = ("from lfdt import mlflow_runs, stage\n"
+              "def run():\n    with mlflow_runs.stage_run('probe', {}):\n        pass\n"
+              "stage.main(run)\n")
     t0 = time.monotonic()
-    out = subprocess.run([sys.executable, str(root / "stages" / "fit_dynamics.py")], cwd=root, env=env,
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", script], cwd=root, env=env, capture_output=True, text=True,
+                         timeout=120)
     took = time.monotonic() - t0
     assert out.returncode == 2, out.stderr[-2000:]
     assert f"MLFLOW_TRACKING_URI=http://127.0.0.1:{port} does not answer" in out.stderr
