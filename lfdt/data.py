@@ -13,9 +13,10 @@ half-written dataset under the final name.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -136,13 +137,20 @@ class DataFileError(StageError, ValueError):
     """A data file that cannot be read, or is not the kind, domain or task its reader needs; names the file."""
 
 
-def _read_table(path: Path, columns: list[str] | None) -> pa.Table:
+@contextlib.contextmanager
+def _readable(path: str | Path) -> Iterator[None]:
+    """Turn Arrow's and the OS's read errors into a DataFileError that names the file (a missing file stays one)."""
     try:
-        return pq.read_table(path, columns=columns)
+        yield
     except FileNotFoundError:
         raise
     except (pa.ArrowException, OSError) as e:
         raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
+
+
+def _read_table(path: Path, columns: list[str] | None) -> pa.Table:
+    with _readable(path):
+        return pq.read_table(path, columns=columns)
 
 
 def check_identity(path: str | Path, kind: str | None = None, domain: str | None = None,
@@ -153,11 +161,10 @@ def check_identity(path: str | Path, kind: str | None = None, domain: str | None
     (files of the simulated box push written before tasks were named carry none: they count as 'box_push').
     """
     try:
-        meta = read_metadata(path)
-    except FileNotFoundError:
+        with _readable(path):
+            meta = read_metadata(path)
+    except DataFileError:
         raise
-    except (pa.ArrowException, OSError) as e:
-        raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
     except ValueError as e:
         raise DataFileError(str(e)) from None
     have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", layout.BOX_PUSH.name)}
@@ -195,14 +202,12 @@ def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> l
 
 
 def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskLayout = layout.BOX_PUSH) -> dict:
-    """Validate a transitions file's schema against the layout; returns its metadata. Raises ValueError."""
-    schema = pq.read_schema(_first_file(path))
-    meta = read_metadata(path)
+    """Validate a transitions file's identity (:func:`check_identity`) and its schema against the layout; returns
+    its metadata. Raises DataFileError, naming the file."""
+    meta = check_identity(path, kind, domain)
+    with _readable(path):
+        schema = pq.read_schema(_first_file(path))
     problems = []
-    if meta.get("kind") != kind:
-        problems.append(f"kind is {meta.get('kind')!r}, expected {kind!r}")
-    if meta.get("domain") != domain:
-        problems.append(f"domain is {meta.get('domain')!r}, expected {domain!r}")
     expected = list(INDEX_COLUMNS)
     expected += [layout.STATE_PREFIX + c for c in tl.state_columns(domain)]
     if kind == "random":
@@ -220,7 +225,7 @@ def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskL
         if f.name in expected and not (f.metadata or {}).get(b"description"):
             problems.append(f"column {f.name} has no description")
     if problems:
-        raise ValueError(f"{path}: " + "; ".join(problems))
+        raise DataFileError(f"{path}: " + "; ".join(problems))
     return meta
 
 

@@ -297,17 +297,32 @@ def pipeline_run_name(kind: str) -> str:
     return f"{kind} {git_commit()[:7]}" + (f" {exp}" if exp else "")
 
 
+class RunNotFound(StageError):
+    """A run a parent run should adopt is not in the tracking store the stage logs to."""
+
+
 def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:
-    """Make runs children of a parent run (the MLflow UI nests them); runs that no longer exist are skipped."""
+    """Make runs children of a parent run (the MLflow UI nests them); returns how many.
+
+    Every id must name a run of the current tracking store: one that is missing (the store was replaced, or a sweep's
+    workers logged elsewhere) raises RunNotFound naming it and the store, never a silent skip, since the parent run
+    would then not hold what its table was built from.
+    """
     import mlflow
     from mlflow.exceptions import MlflowException
 
     client = mlflow.MlflowClient()
-    n = 0
-    for rid in dict.fromkeys(run_ids):
+    ids = list(dict.fromkeys(run_ids))
+    missing = []
+    for rid in ids:
         try:
-            _retry(lambda r=rid: client.set_tag(r, "mlflow.parentRunId", parent_run_id))
-            n += 1
+            _retry(lambda r=rid: client.get_run(r))
         except MlflowException:
-            continue
-    return n
+            missing.append(rid)
+    if missing:
+        raise RunNotFound(f"{len(missing)} of the {len(ids)} runs behind this report are not in the tracking store "
+                          f"{tracking_uri()} (first: {missing[0]}): the stages that logged them wrote to another "
+                          f"store; rerun them here (`dvc repro -f <stage>`), or point MLFLOW_TRACKING_URI at theirs")
+    for rid in ids:
+        _retry(lambda r=rid: client.set_tag(r, "mlflow.parentRunId", parent_run_id))
+    return len(ids)

@@ -5,6 +5,7 @@ import sys
 import textwrap
 
 import mlflow
+import pytest
 
 from lfdt import mlflow_runs
 
@@ -39,6 +40,18 @@ def test_failed_stage_marks_run_failed(tmp_path, monkeypatch):
     except RuntimeError:
         pass
     assert mlflow.MlflowClient(uri).get_run(run_id).info.status == "FAILED"
+
+
+def test_parent_run_adopts_its_children_and_refuses_a_missing_one(tmp_path, monkeypatch):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    with mlflow_runs.stage_run("child", {}) as child:
+        pass
+    with mlflow_runs.stage_run("parent", {}) as parent:
+        assert mlflow_runs.adopt_children(parent.run_id, [child.run_id, child.run_id]) == 1
+        with pytest.raises(mlflow_runs.RunNotFound, match="0123456789abcdef"):
+            mlflow_runs.adopt_children(parent.run_id, [child.run_id, "0123456789abcdef"])
+    assert mlflow.MlflowClient(uri).get_run(child.run_id).data.tags["mlflow.parentRunId"] == parent.run_id
 
 
 def test_two_stages_starting_at_once_share_one_experiment(tmp_path):

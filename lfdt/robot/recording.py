@@ -17,6 +17,7 @@ import pandas as pd
 import pyarrow as pa
 
 from lfdt import data
+from lfdt.files import temp_path
 
 EPISODE_GLOB = "episode_*.parquet"
 IDENTITY = ("kind", "domain", "task")
@@ -45,7 +46,7 @@ class EpisodeRecorder:
                                             f"{mine.get(key)!r}: one folder holds one kind, domain and task (choose "
                                             f"another --out)")
         else:
-            tmp = self.dir / "._meta.json.tmp"
+            tmp = temp_path(meta)
             tmp.write_text(json.dumps(mine, indent=2))
             os.replace(tmp, meta)
         self._rows: list[tuple] | None = None

@@ -13,6 +13,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from lfdt import tasks
+from lfdt.files import temp_path
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyLimits
 
@@ -282,8 +283,7 @@ def write_rig_config(path: str | Path, task: str = "block_push", overwrite: bool
         raise FileExistsError(f"{path} exists (pass --force to overwrite)")
     text = json.dumps(example_rig_config(task), indent=2) + "\n"
     parse_rig_config(text, "example")  # the example must always be valid
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temp_path(path)
     tmp.write_text(text)
     os.replace(tmp, path)
     return path
