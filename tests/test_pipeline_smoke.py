@@ -4,7 +4,6 @@ import csv
 import json
 import os
 import re
-import shutil
 import signal
 import socket
 import subprocess
@@ -15,47 +14,18 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+import smoke
 import yaml
 
 from lfdt import data, layout, methods
-from lfdt.config import validate_params
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _dvc(args, cwd, timeout=600):
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "DVC_NO_ANALYTICS": "1"}
-    env.pop("MLFLOW_TRACKING_URI", None)
-    proc = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=timeout)
-    assert proc.returncode == 0, f"dvc {' '.join(args)} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return proc.stdout + proc.stderr
-
-
-def _merge(base: dict, over: dict) -> dict:
-    """params.yaml with the smoke values laid over it, section by section, at any depth."""
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merge(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
-    return out
+_dvc = smoke.dvc
 
 
 @pytest.fixture(scope="module")
-def project(tmp_path_factory):
-    """A copy of the project with the smoke params, after one full `dvc repro`."""
-    dst = tmp_path_factory.mktemp("smoke")
-    for name in ("dvc.yaml", "lfdt", "stages", "data/real"):  # data/real: the twin stages' robot-data dependency
-        src = ROOT / name
-        (shutil.copytree if src.is_dir() else shutil.copy)(src, dst / name)
-    params = _merge(yaml.safe_load((ROOT / "params.yaml").read_text()),
-                    yaml.safe_load((ROOT / "tests/smoke_params.yaml").read_text()))
-    validate_params(params)
-    (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    subprocess.run(["git", "init", "-q"], cwd=dst, check=True)
-    _dvc(["init", "-q"], dst)
-    _dvc(["config", "core.analytics", "false"], dst)
-    out = _dvc(["repro"], dst)
-    return dst, out
+def project(smoke_project):
+    """A copy of the project with the smoke params, after one full `dvc repro` (tests/conftest.py)."""
+    return smoke_project.root, smoke_project.output
 
 
 METHODS = tuple(methods.METHODS)

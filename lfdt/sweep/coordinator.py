@@ -1,0 +1,192 @@
+"""The coordinator of a sweep: builds the shared stages once, fans the chains out as Ray tasks, then restores every
+chain from the run cache and builds the reports with one ordinary `dvc repro`.
+
+Progress survives a crash: each finished chain is written to a state file under ``.dvc/tmp/sweep/`` (keyed by the
+commit, the params and the remote) the moment it reports, so rerunning the same command runs only the chains that
+failed or never finished.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from tqdm import tqdm
+
+from lfdt.errors import StageError
+from lfdt.files import temp_path
+from lfdt.sweep import runcache
+from lfdt.sweep.chain import RAN, ChainResult, ChainSpec, Remote, run_chain, stage_env
+from lfdt.sweep.plan import Plan, make_plan
+
+OUTPUT_PATHS = ("params.yaml", "dvc.lock", "reports/")
+"""Tracked files a sweep may find changed in the coordinator's workspace, with DVC's .gitignore files (params are
+shipped to every chain; the rest are what the pipeline itself rewrites); any other change would not reach the
+clones, so it stops the sweep."""
+FORWARDED_ENV = ("MLFLOW_TRACKING_URI", "LFDT_MLFLOW_EXPERIMENT", "MLFLOW_TRACKING_TOKEN")
+"""Set for every chain's stages as the coordinator has them. Remote credentials are not sent through Ray: each
+node reads its own (``AWS_*`` in the environment of ``ray start``, or ``~/.aws``)."""
+
+
+class SweepError(StageError):
+    """The sweep cannot start or did not finish; the message names the chain, file or variable."""
+
+
+def _git(root: Path, *args: str) -> str:
+    proc = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SweepError(f"`git {' '.join(args)}` in {root} failed: {proc.stderr.strip()}")
+    return proc.stdout.strip()
+
+
+def check_workspace(root: Path) -> str:
+    """The commit the chains clone; SweepError when the workspace has changes they would not see."""
+    if not (root / "dvc.yaml").exists():
+        raise SweepError(f"{root} holds no dvc.yaml: run the sweep from the project's root")
+    commit = _git(root, "rev-parse", "HEAD")
+    changed = _git(root, "diff", "--name-only", "HEAD").splitlines()  # staged or not, relative to the root
+    stray = [p for p in changed if not p.startswith(OUTPUT_PATHS) and Path(p).name != ".gitignore"]
+    if stray:
+        raise SweepError(f"uncommitted changes in {', '.join(stray[:5])}: the chains clone commit {commit[:7]} and "
+                         f"would not see them; commit them first (params.yaml may differ: it is sent to every chain)")
+    return commit
+
+
+def tracking_env(forward: list[str]) -> dict[str, str]:
+    """The variables every chain gets; SweepError when no shared tracking store is set."""
+    uri = os.environ.get("MLFLOW_TRACKING_URI", "")
+    if not uri or uri.startswith(("sqlite:", "file:")) or "://" not in uri:
+        raise SweepError(f"MLFLOW_TRACKING_URI={uri!r}: a sweep's chains run on other machines, so their runs need "
+                         f"a tracking server every node reaches (e.g. http://head-node:5000; README, 'When one "
+                         f"machine is not enough')")
+    missing = [v for v in forward if v not in os.environ]
+    if missing:
+        raise SweepError(f"--forward-env names variables that are not set here: {', '.join(missing)}")
+    return {k: os.environ[k] for k in (*FORWARDED_ENV, *forward) if k in os.environ}
+
+
+class SweepState:
+    """Finished chains of one sweep (commit, params, remote), kept in a JSON file written after each chain."""
+
+    def __init__(self, root: Path, commit: str, params_yaml: str, remote: Remote):
+        key = hashlib.sha256(json.dumps([commit, params_yaml, asdict(remote)]).encode()).hexdigest()[:16]
+        self.path = root / ".dvc" / "tmp" / "sweep" / f"{key}.json"
+        self.finished: dict[str, dict] = {}
+        if self.path.exists():
+            self.finished = json.loads(self.path.read_text()).get("finished", {})
+
+    def done(self, result: ChainResult) -> None:
+        self.finished[result.name] = {"host": result.host, "wall_s": round(result.wall_s, 1), "ran": result.ran}
+        tmp = temp_path(self.path)
+        tmp.write_text(json.dumps({"finished": self.finished}, indent=2) + "\n")
+        os.replace(tmp, self.path)
+
+
+def _dvc_streamed(root: Path, env: dict[str, str], *args: str) -> str:
+    """Run dvc with its output shown as it comes and returned."""
+    proc = subprocess.Popen([sys.executable, "-m", "dvc", *args], cwd=root, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    out = []
+    for line in proc.stdout:
+        sys.stdout.write(line)
+        out.append(line)
+    if proc.wait() != 0:
+        raise SweepError(f"`dvc {' '.join(args)}` in {root} exited with {proc.returncode}")
+    return "".join(out)
+
+
+def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_chain: float = 1.0,
+              repo_url: str | None = None, forward_env: list[str] | None = None, workdir: str | None = None,
+              only: list[str] | None = None) -> dict:
+    """The whole sweep; returns a summary (chains run, skipped and failed, what the final `dvc repro` ran).
+
+    SweepError when a chain failed (named, with the end of its log; the rest are kept) or when the final
+    `dvc repro` had to run a chain's stage itself.
+    """
+    import ray
+
+    start = time.monotonic()
+    root = root.resolve()
+    commit = check_workspace(root)
+    extra = tracking_env(forward_env or [])
+    env = stage_env(root, extra)
+    remote.configure(root, env)
+    params_yaml = (root / "params.yaml").read_text()
+    plan = make_plan(root)
+    unknown = sorted(set(only or []) - set(plan.chains))
+    if unknown:
+        raise SweepError(f"--chains names no chain of this plan: {', '.join(unknown)} (see --list)")
+
+    print(f"sweep of commit {commit[:7]}: {len(plan.shared)} shared stages, {len(plan.chains)} chains, "
+          f"{len(plan.final)} final stages", flush=True)
+    runcache.fetch(root, remote.name)
+    _dvc_streamed(root, env, "repro", "--pull", *plan.shared)
+    runcache.publish(root, remote.name)
+
+    state = SweepState(root, commit, params_yaml, remote)
+    todo = [c for c in plan.chains if c not in state.finished and (not only or c in only)]
+    skipped = [c for c in plan.chains if c in state.finished]
+    if skipped:
+        print(f"{len(skipped)} chains finished in an earlier run of this sweep, not run again: {', '.join(skipped)}")
+    failed: list[ChainResult] = []
+    if todo:
+        ray.init(address=address, log_to_driver=False, configure_logging=False)
+        try:
+            task = ray.remote(run_chain).options(num_cpus=cpus_per_chain, max_retries=0)
+            pending = {task.remote(ChainSpec(name=c, stages=plan.chains[c], shared=plan.shared,
+                                             repo_url=repo_url or str(root), commit=commit, params_yaml=params_yaml,
+                                             remote=remote, env=extra, workdir=workdir)): c for c in todo}
+            with tqdm(total=len(todo), desc="chains", unit="chain") as bar:
+                while pending:
+                    ready, _ = ray.wait(list(pending), num_returns=1)
+                    name = pending.pop(ready[0])
+                    try:
+                        result = ray.get(ready[0])
+                    except Exception as e:  # noqa: BLE001 - a lost worker or node: reported as this chain's failure
+                        result = ChainResult(name, ok=False, host="?", wall_s=0.0, ran=[], restored=[],
+                                             error=f"{type(e).__name__}: {e}")
+                    if result.ok:
+                        state.done(result)
+                    else:
+                        failed.append(result)
+                    bar.write(f"{'done' if result.ok else 'FAILED'}: {name} on {result.host} "
+                              f"({result.wall_s:.0f} s; ran {len(result.ran)}, restored {len(result.restored)})")
+                    bar.update()
+        finally:
+            ray.shutdown()
+    if failed:
+        logs = root / ".dvc" / "tmp" / "sweep" / "failed"
+        logs.mkdir(parents=True, exist_ok=True)
+        for r in failed:
+            (logs / f"{re.sub(r'[^A-Za-z0-9_.-]', '_', r.name)}.log").write_text(f"{r.error}\n{r.log_tail}")
+        names = ", ".join(f"{r.name} ({r.error})" for r in failed)
+        raise SweepError(f"{len(failed)} of {len(plan.chains)} chains failed: {names}. Their logs are in {logs}; "
+                         f"rerun the same command to run only them (finished chains are kept)")
+    if only:
+        return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": [],
+                "wall_s": time.monotonic() - start}
+
+    runcache.fetch(root, remote.name)
+    out = _dvc_streamed(root, env, "repro", "--pull")
+    ran = RAN.findall(out)
+    rerun = sorted(set(ran) & {s for stages in plan.chains.values() for s in stages})
+    if rerun:
+        raise SweepError(f"the final `dvc repro` ran {len(rerun)} chain stages itself ({', '.join(rerun[:5])}): "
+                         f"their run records or objects are missing from the remote {remote.name!r}")
+    return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": ran,
+            "wall_s": time.monotonic() - start}
+
+
+def describe(plan: Plan) -> str:
+    """The plan as text (``--list``)."""
+    lines = [f"shared (built once, here): {', '.join(plan.shared)}"]
+    lines += [f"chain {name}: {', '.join(stages)}" for name, stages in plan.chains.items()]
+    lines.append(f"final (here, after the chains): {', '.join(plan.final)}")
+    return "\n".join(lines)
