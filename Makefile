@@ -35,6 +35,7 @@ benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/re
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/collect_throughput.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/training_throughput.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/parallel_speedup.py
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/sweep_vs_repro.py
 
 mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000
 	$(BIN)/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
