@@ -18,12 +18,11 @@ TABLES = ("reports/table1.csv", "reports/table1_runs.csv", "reports/twin_runs.cs
 """What a run of the smoke params reports: a sweep of the same params must give them byte for byte."""
 
 
-def dvc(args: list[str], cwd: Path, timeout: float = 600, env: dict[str, str] | None = None) -> str:
-    """Run dvc in ``cwd`` with this interpreter's tools first on PATH; fail the test with its output otherwise."""
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "DVC_NO_ANALYTICS": "1",
-           **(env or {})}
-    if "MLFLOW_TRACKING_URI" not in (env or {}):
-        env.pop("MLFLOW_TRACKING_URI", None)
+def dvc(args: list[str], cwd: Path, timeout: float = 600) -> str:
+    """Run dvc in ``cwd`` with this interpreter's tools first on PATH and the project's own tracking store (any
+    MLFLOW_TRACKING_URI of the caller's removed); fail the test with its output otherwise."""
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "DVC_NO_ANALYTICS": "1"}
+    env.pop("MLFLOW_TRACKING_URI", None)
     proc = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=timeout)
     assert proc.returncode == 0, f"dvc {' '.join(args)} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"

@@ -21,7 +21,7 @@ import pytest
 import services
 import smoke
 
-from lfdt.sweep.chain import RAN
+from lfdt.sweep.chain import RAN, safe_name
 from lfdt.sweep.plan import make_plan
 
 BUCKET = "lfdt-sweep"
@@ -80,7 +80,7 @@ def _pids_in(clone_prefix: str) -> list[int]:
 
 def _kill_chain_when_a_stage_runs(proc: subprocess.Popen, chain: str, stage_script: str) -> bool:
     """Wait until a stage of ``chain`` runs on a worker, then kill every process of that chain."""
-    prefix = "lfdt-chain-" + chain.replace("@", "_")
+    prefix = f"lfdt-chain-{safe_name(chain)}-"
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline and proc.poll() is None:
         for pid in _pids_in(prefix):

@@ -73,6 +73,7 @@ class ChainResult:
     error: str = ""
     log_tail: str = ""
     clone: str = ""
+    """Where the chain ran on ``host`` (kept there when it failed)."""
 
 
 class ChainFailed(RuntimeError):
@@ -81,6 +82,11 @@ class ChainFailed(RuntimeError):
     def __init__(self, message: str, output: str = ""):
         super().__init__(message)
         self.output = output
+
+
+def safe_name(name: str) -> str:
+    """A chain's name as a file name (stage names hold '@')."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
 
 
 def stage_env(root: Path, extra: dict[str, str]) -> dict[str, str]:
@@ -120,7 +126,7 @@ def run_chain(spec: ChainSpec) -> ChainResult:
     start = time.monotonic()
     base = Path(spec.workdir or tempfile.gettempdir())
     base.mkdir(parents=True, exist_ok=True)
-    clone = Path(tempfile.mkdtemp(prefix=f"lfdt-chain-{re.sub(r'[^A-Za-z0-9_.-]', '_', spec.name)}-", dir=base))
+    clone = Path(tempfile.mkdtemp(prefix=f"lfdt-chain-{safe_name(spec.name)}-", dir=base))
     log_path = clone.with_suffix(".log")
     result = ChainResult(spec.name, ok=False, host=socket.gethostname(), wall_s=0.0, ran=[], restored=[],
                          clone=str(clone))

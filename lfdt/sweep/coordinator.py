@@ -11,7 +11,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import re
 import subprocess
 import sys
 import time
@@ -23,7 +22,7 @@ from tqdm import tqdm
 from lfdt.errors import StageError
 from lfdt.files import temp_path
 from lfdt.sweep import runcache
-from lfdt.sweep.chain import RAN, ChainResult, ChainSpec, Remote, run_chain, stage_env
+from lfdt.sweep.chain import RAN, ChainResult, ChainSpec, Remote, run_chain, safe_name, stage_env
 from lfdt.sweep.plan import Plan, make_plan
 
 OUTPUT_PATHS = ("params.yaml", "dvc.lock", "reports/")
@@ -165,7 +164,8 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
         logs = root / ".dvc" / "tmp" / "sweep" / "failed"
         logs.mkdir(parents=True, exist_ok=True)
         for r in failed:
-            (logs / f"{re.sub(r'[^A-Za-z0-9_.-]', '_', r.name)}.log").write_text(f"{r.error}\n{r.log_tail}")
+            kept = f"clone kept on {r.host}: {r.clone}\n" if r.clone else ""
+            (logs / f"{safe_name(r.name)}.log").write_text(f"{r.error}\n{kept}{r.log_tail}")
         names = ", ".join(f"{r.name} ({r.error})" for r in failed)
         raise SweepError(f"{len(failed)} of {len(plan.chains)} chains failed: {names}. Their logs are in {logs}; "
                          f"rerun the same command to run only them (finished chains are kept)")
