@@ -63,6 +63,23 @@ def stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
         proc.wait(timeout=5)
 
 
+def stop_all(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
+    """Stop several servers at once (each by its process group): SIGTERM to all, then SIGKILL to what is left."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        alive = [p for p in procs if p.poll() is None or _group_alive(p.pid)]
+        for p in alive:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, sig)
+        deadline = time.monotonic() + timeout
+        while alive and time.monotonic() < deadline:
+            for p in alive:
+                p.poll()
+            alive = [p for p in alive if _group_alive(p.pid)]
+            time.sleep(0.1)
+    for p in procs:
+        stop(p)  # reaps the leader; a no-op for a group already gone
+
+
 def _group_alive(pgid: int) -> bool:
     try:
         os.killpg(pgid, 0)
@@ -184,8 +201,7 @@ def ray_cluster(logs: Path, workers: int = 1, env: dict[str, str] | None = None)
                  log=logs / "ray-worker0.log")
         yield address
     finally:
-        for p in reversed(procs):
-            stop(p)
+        stop_all(procs)
         shutil.rmtree(temp, ignore_errors=True)
 
 

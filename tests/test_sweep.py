@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import pytest
 import services
 import smoke
 
+from lfdt.sweep import points
 from lfdt.sweep.chain import RAN, safe_name
 from lfdt.sweep.plan import make_plan
 
@@ -37,10 +39,15 @@ class Cluster:
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     logs = tmp_path_factory.mktemp("service-logs")
-    with services.postgres(logs) as pg, services.s3_server(logs, BUCKET) as s3, \
-            services.mlflow_server(logs, pg, f"s3://{BUCKET}/mlartifacts", s3) as ml, \
-            services.ray_cluster(logs, workers=1, env=services.S3_ENV) as address:
-        yield Cluster(s3, ml, address)
+    with contextlib.ExitStack() as stack, ThreadPoolExecutor(1) as pool:
+        # Ray starts beside the others (its nodes take the longest); stopped last, also when another fails
+        ray = services.ray_cluster(logs, workers=1, env=services.S3_ENV)
+        started = pool.submit(ray.__enter__)
+        stack.callback(lambda: started.exception() is None and ray.__exit__(None, None, None))
+        pg = stack.enter_context(services.postgres(logs))
+        s3 = stack.enter_context(services.s3_server(logs, BUCKET))
+        ml = stack.enter_context(services.mlflow_server(logs, pg, f"s3://{BUCKET}/mlartifacts", s3))
+        yield Cluster(s3, ml, started.result())
 
 
 def _sweep(coord: Path, cluster: Cluster, *extra: str, background: bool = False):
@@ -78,18 +85,37 @@ def _pids_in(clone_prefix: str) -> list[int]:
     return pids
 
 
+def _cmdline(pid: int) -> str:
+    return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+
+
+def _ray_workers_of(pids: list[int]) -> set[int]:
+    """The Ray worker processes (``ray::run_chain``) that started any of ``pids``."""
+    workers = set()
+    for pid in pids:
+        with contextlib.suppress(OSError, ValueError):
+            ppid = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+            if _cmdline(ppid).startswith("ray::"):
+                workers.add(ppid)
+    return workers
+
+
 def _kill_chain_when_a_stage_runs(proc: subprocess.Popen, chain: str, stage_script: str) -> bool:
-    """Wait until a stage of ``chain`` runs on a worker, then kill every process of that chain."""
+    """Wait until a stage of ``chain`` runs on a worker, then kill the chain's Ray worker process and every process
+    of the chain: what a lost worker or node leaves behind."""
     prefix = f"lfdt-chain-{safe_name(chain)}-"
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline and proc.poll() is None:
         for pid in _pids_in(prefix):
             try:
-                cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+                cmd = _cmdline(pid)
             except OSError:
                 continue
             if stage_script in cmd:
-                for p in _pids_in(prefix):
+                chain_pids = _pids_in(prefix)
+                workers = _ray_workers_of(chain_pids)
+                assert workers, "no Ray worker process found above the chain's processes"
+                for p in [*workers, *chain_pids]:
                     with contextlib.suppress(ProcessLookupError):
                         os.kill(p, signal.SIGKILL)
                 return True
@@ -97,8 +123,14 @@ def _kill_chain_when_a_stage_runs(proc: subprocess.Popen, chain: str, stage_scri
     return False
 
 
-def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smoke_project, cluster, tmp_path):
-    coord = smoke.make_project(tmp_path / "coordinator", commit=True)
+@pytest.fixture(scope="module")
+def coordinator(tmp_path_factory) -> Path:
+    """The workspace the sweeps of this module start from (the smoke params, committed)."""
+    return smoke.make_project(tmp_path_factory.mktemp("sweep") / "coordinator", commit=True)
+
+
+def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smoke_project, cluster, coordinator):
+    coord = coordinator
     plan = make_plan(coord)
     assert len(plan.chains) >= 4 and plan.shared and "report" in plan.final
     chain_stages = {s for stages in plan.chains.values() for s in stages}
@@ -142,3 +174,38 @@ def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smok
     assert len(evaluate) == sum(s.startswith("evaluate@") for s in chain_stages) * 2  # two seeds each
     children = client.search_runs([exp.experiment_id], f"tags.`mlflow.parentRunId` = '{parent}'", max_results=500)
     assert {r.info.run_id for r in evaluate} <= {r.info.run_id for r in children}
+
+
+def test_a_point_of_set_is_recorded_as_an_experiment_from_the_run_cache(smoke_project, cluster, coordinator):
+    """``--set``: each point is swept in a clone and recorded as a DVC experiment of the workspace. A point with the
+    params of the sweep above reruns no chain (when run alone, its chains run first); recording it restores every
+    shared and chain stage and builds only the reports, whose tables are the plain `dvc repro`'s; the workspace is
+    left as it was, and rerunning the command skips the point."""
+    coord = coordinator
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=coord, capture_output=True, text=True).stdout
+    params = (coord / "params.yaml").read_bytes()
+    (point,) = points.expand(params.decode(), ["evaluation.trials=3"])  # the smoke params' own value
+    plan = make_plan(coord)
+
+    run = _sweep(coord, cluster, "--set", "evaluation.trials=3")
+    assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-4000:]
+    out = run.stdout
+    assert f"point 1/1 ({point.name}): evaluation.trials=3" in out and f"Ran experiment(s): {point.name}" in out
+    assert "Table I of each point" in out and f"| {point.name} |" in out
+    ran = RAN.findall(out[out.index("Reproducing experiment"):])
+    assert set(ran) <= set(plan.final), ran  # the experiment restored the rest, at most rebuilding reports
+    assert not set(RAN.findall(out)) & {s for stages in plan.chains.values() for s in stages}
+
+    refs = subprocess.run(["git", "for-each-ref", "--format=%(refname)", "refs/exps"], cwd=coord,
+                          capture_output=True, text=True, check=True).stdout.split()
+    (ref,) = [r for r in refs if r.endswith(f"/{point.name}")]
+    for table, plain in smoke_project.tables.items():
+        shown = subprocess.run(["git", "show", f"{ref}:{table}"], cwd=coord, capture_output=True, check=True)
+        assert shown.stdout == plain, f"{table} of experiment {point.name} differs from the plain `dvc repro`"
+    assert subprocess.run(["git", "status", "--porcelain"], cwd=coord, capture_output=True,
+                          text=True).stdout == status and (coord / "params.yaml").read_bytes() == params
+    assert not (coord / ".dvc/tmp/sweep/points").exists() or not any((coord / ".dvc/tmp/sweep/points").iterdir())
+
+    again = _sweep(coord, cluster, "--set", "evaluation.trials=3")
+    assert again.returncode == 0 and "1 of 1 points are experiments already" in again.stdout, again.stdout[-3000:]
+    assert "point 1/1" not in again.stdout

@@ -10,8 +10,9 @@ from pathlib import Path
 import networkx as nx
 import pytest
 import smoke
+import yaml
 
-from lfdt.sweep import coordinator
+from lfdt.sweep import coordinator, points
 from lfdt.sweep.plan import make_plan, upstream_graph
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,3 +72,48 @@ def test_sweep_refuses_uncommitted_code_and_a_local_tracking_store(repo, monkeyp
     assert coordinator.tracking_env([]) == {"MLFLOW_TRACKING_URI": "http://127.0.0.1:5000"}
     with pytest.raises(coordinator.SweepError, match="NOT_SET_ANYWHERE"):
         coordinator.tracking_env(["NOT_SET_ANYWHERE"])
+
+
+def test_set_expands_every_combination_into_valid_params_with_comments_kept():
+    base = (ROOT / "params.yaml").read_text()
+    pts = points.expand(base, ["grid.seeds=[3,4,5],[3,4,5,6,7,8]", "translator.lambda_dyn=10,1"])
+    assert [p.overrides for p in pts] == [
+        (("grid.seeds", [3, 4, 5]), ("translator.lambda_dyn", 10)),
+        (("grid.seeds", [3, 4, 5]), ("translator.lambda_dyn", 1)),
+        (("grid.seeds", [3, 4, 5, 6, 7, 8]), ("translator.lambda_dyn", 10)),
+        (("grid.seeds", [3, 4, 5, 6, 7, 8]), ("translator.lambda_dyn", 1))]
+    assert len({p.name for p in pts}) == 4 and pts[2].name.startswith("seeds-3.4.5.6.7.8-lambda_dyn-10-")
+    six = yaml.safe_load(pts[3].params_yaml)
+    assert six["grid"]["seeds"] == [3, 4, 5, 6, 7, 8] and six["translator"]["lambda_dyn"] == 1
+    changed = [(a, b) for a, b in zip(base.splitlines(), pts[3].params_yaml.splitlines(), strict=True) if a != b]
+    assert len(changed) == 2 and all("# " in b for _, b in changed)  # only those two lines, comments kept
+    assert pts[3].set_args() == ["-S", "grid.seeds=[3, 4, 5, 6, 7, 8]", "-S", "translator.lambda_dyn=1"]
+    assert points.expand(base, ["grid.seeds=[3,4,5]"])[0].params_yaml == base  # the workspace's own values
+
+
+@pytest.mark.parametrize(("sets", "match"), [
+    (["grid.seeds"], "expected KEY=VALUE"),
+    (["translator.lambda_dyn=1,,2"], "an empty value"),
+    (["translator.lambda_dyn=1", "translator.lambda_dyn=2"], "twice"),
+    (["translator.lambda_dnn=1"], "no 'translator.lambda_dnn'"),
+    (["translator.lambda_dyn=-1"], "translator.lambda_dyn = -1"),
+    (["grid.seeds=[1,2],[1, 2]"], "same value twice"),
+])
+def test_set_refuses_what_would_not_run(sets, match):
+    with pytest.raises(points.PointError, match=match):
+        points.expand((ROOT / "params.yaml").read_text(), sets)
+
+
+def test_split_values_keeps_brackets_and_quotes_whole():
+    assert points.split_values("[3,4],[5], 'a,b' ,{x: 1, y: 2}") == ["[3,4]", "[5]", "'a,b'", "{x: 1, y: 2}"]
+
+
+def test_compare_puts_the_points_tables_side_by_side():
+    head = "method,demos,seeds,success_rate,ci95_low,ci95_high\n"
+    three = head + "lfdt,100,3,0.49,0.14,0.84\nbc_no_translation,100,3,0.80,0.70,0.90\n"
+    six = head + "lfdt,100,6,0.52,0.31,0.73\nlfdt,200,6,0.30,0.10,0.50\n"
+    lines = points.compare({"seeds-3": three, "seeds-6": six}).splitlines()
+    assert lines[0] == "| method | demos | seeds-3 | seeds-6 |"
+    assert "| lfdt | 100 | 49.0% [14%, 84%], 3 seeds | 52.0% [31%, 73%], 6 seeds |" in lines
+    assert "| bc_no_translation | 100 | 80.0% [70%, 90%], 3 seeds | - |" in lines
+    assert "| lfdt | 200 | - | 30.0% [10%, 50%], 6 seeds |" in lines

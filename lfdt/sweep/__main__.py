@@ -4,6 +4,9 @@ Examples::
 
     python -m lfdt.sweep --list
     MLFLOW_TRACKING_URI=http://head:5000 python -m lfdt.sweep --address head:6379 --remote-url s3://bucket/lfdt
+    # six seeds and two weights of L_dyn: four points, each recorded as a DVC experiment (dvc exp show)
+    python -m lfdt.sweep --address head:6379 --remote-url s3://bucket/lfdt \
+        --set grid.seeds=[3,4,5],[3,4,5,6,7,8] --set translator.lambda_dyn=10,1
 """
 
 from __future__ import annotations
@@ -15,8 +18,9 @@ from pathlib import Path
 
 from lfdt.errors import StageError
 from lfdt.sweep.chain import Remote
-from lfdt.sweep.coordinator import describe, run_sweep
+from lfdt.sweep.coordinator import describe, run_points, run_sweep
 from lfdt.sweep.plan import make_plan
+from lfdt.sweep.points import expand
 
 
 def parser() -> argparse.ArgumentParser:
@@ -38,6 +42,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--workdir", help="directory for the clones on each worker (default its temporary directory)")
     p.add_argument("--forward-env", action="append", default=[], metavar="VAR",
                    help="also set VAR, as it is here, for every chain's stages (repeatable)")
+    p.add_argument("-S", "--set", action="append", default=[], metavar="KEY=V1[,V2...]", dest="sets",
+                   help="sweep these values of a params.yaml key (repeatable; every combination is a point, "
+                        "recorded as a DVC experiment; lists in brackets: grid.seeds=[3,4,5],[3,4,5,6,7,8])")
     p.add_argument("--chains", nargs="+", metavar="CHAIN", help="run only these chains (names as --list prints "
                                                                 "them), not the final stages")
     return p
@@ -49,14 +56,25 @@ def main(argv: list[str] | None = None) -> int:
     root = Path.cwd()
     try:
         if args.list:
-            print(describe(make_plan(root)))
+            points = expand((root / "params.yaml").read_text(), args.sets) if args.sets else []
+            print(describe(make_plan(root)))  # of the workspace's params: a point's grid may add chains
+            for i, point in enumerate(points, 1):
+                print(f"point {i} ({point.name}): {point.describe()}")
             return 0
         if args.endpoint_url and not args.remote_url:
             raise StageError("--endpoint-url needs --remote-url")
+        if args.sets and args.chains:
+            raise StageError("--chains runs part of one point's sweep: it cannot be combined with --set")
         remote = Remote(args.remote, args.remote_url, args.endpoint_url)
-        summary = run_sweep(root, remote, address=args.address, cpus_per_chain=args.cpus_per_chain,
-                            repo_url=args.repo_url, forward_env=args.forward_env, workdir=args.workdir,
-                            only=args.chains)
+        options = dict(address=args.address, cpus_per_chain=args.cpus_per_chain, repo_url=args.repo_url,
+                       forward_env=args.forward_env, workdir=args.workdir)
+        if args.sets:
+            summary = run_points(root, args.sets, remote, **options)
+            print(f"sweep done in {summary['wall_s']:.0f} s: {len(summary['points_run'])} points recorded as "
+                  f"experiments ({', '.join(summary['points_run']) or 'none new'}); compare them with "
+                  f"`dvc exp show` or `dvc metrics diff`")
+            return 0
+        summary = run_sweep(root, remote, only=args.chains, **options)
     except StageError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

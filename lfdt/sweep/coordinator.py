@@ -11,12 +11,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
 
+import yaml
 from tqdm import tqdm
 
 from lfdt.errors import StageError
@@ -24,6 +26,7 @@ from lfdt.files import temp_path
 from lfdt.sweep import runcache
 from lfdt.sweep.chain import RAN, ChainResult, ChainSpec, Remote, run_chain, safe_name, stage_env
 from lfdt.sweep.plan import Plan, make_plan
+from lfdt.sweep.points import TABLE, Point, compare, expand
 
 OUTPUT_PATHS = ("params.yaml", "dvc.lock", "reports/")
 """Tracked files a sweep may find changed in the coordinator's workspace, with DVC's .gitignore files (params are
@@ -74,9 +77,11 @@ def tracking_env(forward: list[str]) -> dict[str, str]:
 class SweepState:
     """Finished chains of one sweep (commit, params, remote), kept in a JSON file written after each chain."""
 
-    def __init__(self, root: Path, commit: str, params_yaml: str, remote: Remote):
-        key = hashlib.sha256(json.dumps([commit, params_yaml, asdict(remote)]).encode()).hexdigest()[:16]
-        self.path = root / ".dvc" / "tmp" / "sweep" / f"{key}.json"
+    def __init__(self, state_dir: Path, commit: str, params_yaml: str, remote: Remote):
+        # the params' values, not their text: a point of --set writes the same params in another layout
+        params = yaml.safe_load(params_yaml)
+        key = hashlib.sha256(json.dumps([commit, params, asdict(remote)], sort_keys=True).encode()).hexdigest()[:16]
+        self.path = state_dir / f"{key}.json"
         self.finished: dict[str, dict] = {}
         if self.path.exists():
             self.finished = json.loads(self.path.read_text()).get("finished", {})
@@ -103,8 +108,13 @@ def _dvc_streamed(root: Path, env: dict[str, str], *args: str) -> str:
 
 def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_chain: float = 1.0,
               repo_url: str | None = None, forward_env: list[str] | None = None, workdir: str | None = None,
-              only: list[str] | None = None) -> dict:
+              only: list[str] | None = None, state_dir: Path | None = None, final: bool = True) -> dict:
     """The whole sweep; returns a summary (chains run, skipped and failed, what the final `dvc repro` ran).
+
+    ``state_dir`` holds the record of finished chains and the logs of failed ones (default ``root``'s
+    ``.dvc/tmp/sweep``; the points of ``--set`` keep theirs in the workspace's, so a point with the params of an
+    earlier sweep there reruns no chain). Without ``final`` the last `dvc repro` restores the chains' stages (their
+    objects come into the cache) but builds none of the final stages: a point's experiment builds those.
 
     SweepError when a chain failed (named, with the end of its log; the rest are kept) or when the final
     `dvc repro` had to run a chain's stage itself.
@@ -116,7 +126,7 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
     commit = check_workspace(root)
     extra = tracking_env(forward_env or [])
     env = stage_env(root, extra)
-    remote.configure(root, env)
+    remote.configure(root)
     params_yaml = (root / "params.yaml").read_text()
     plan = make_plan(root)
     unknown = sorted(set(only or []) - set(plan.chains))
@@ -129,7 +139,8 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
     _dvc_streamed(root, env, "repro", "--pull", *plan.shared)
     runcache.publish(root, remote.name)
 
-    state = SweepState(root, commit, params_yaml, remote)
+    state_dir = state_dir or root / ".dvc" / "tmp" / "sweep"
+    state = SweepState(state_dir, commit, params_yaml, remote)
     todo = [c for c in plan.chains if c not in state.finished and (not only or c in only)]
     skipped = [c for c in plan.chains if c in state.finished]
     if skipped:
@@ -161,7 +172,7 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
         finally:
             ray.shutdown()
     if failed:
-        logs = root / ".dvc" / "tmp" / "sweep" / "failed"
+        logs = state_dir / "failed"
         logs.mkdir(parents=True, exist_ok=True)
         for r in failed:
             kept = f"clone kept on {r.host}: {r.clone}\n" if r.clone else ""
@@ -174,14 +185,104 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
                 "wall_s": time.monotonic() - start}
 
     runcache.fetch(root, remote.name)
-    out = _dvc_streamed(root, env, "repro", "--pull")
+    chain_stages = [s for stages in plan.chains.values() for s in stages]
+    out = _dvc_streamed(root, env, "repro", "--pull", *([] if final else chain_stages))
     ran = RAN.findall(out)
-    rerun = sorted(set(ran) & {s for stages in plan.chains.values() for s in stages})
+    rerun = sorted(set(ran) & set(chain_stages))
     if rerun:
         raise SweepError(f"the final `dvc repro` ran {len(rerun)} chain stages itself ({', '.join(rerun[:5])}): "
                          f"their run records or objects are missing from the remote {remote.name!r}")
     return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": ran,
-            "wall_s": time.monotonic() - start}
+            "final": plan.final, "wall_s": time.monotonic() - start}
+
+
+def _point_clone(root: Path, commit: str, point: Point, env: dict[str, str]) -> Path:
+    """The workspace in which ``point`` is swept: a clone of ``root`` at ``commit`` with the point's params.yaml and
+    ``root``'s DVC cache (so every output and run record lands where the experiment is recorded). Reused when it
+    exists: its sweep state makes a rerun skip the chains that finished."""
+    clone = root / ".dvc" / "tmp" / "sweep" / "points" / f"{commit[:7]}-{point.key}"
+    if not (clone / ".git").exists():
+        clone.parent.mkdir(parents=True, exist_ok=True)
+        tmp = clone.with_name(clone.name + ".partial")  # a crash mid-clone leaves this, never a half clone
+        shutil.rmtree(tmp, ignore_errors=True)
+        _git(clone.parent, "clone", "--quiet", "--no-checkout", str(root), tmp.name)
+        _git(tmp, "checkout", "--quiet", commit)
+        os.replace(tmp, clone)
+    (clone / "params.yaml").write_text(point.params_yaml)
+    cache = str(root / ".dvc" / "cache")
+    for key, value in (("cache.dir", cache), ("cache.type", "reflink,hardlink,copy")):
+        subprocess.run([sys.executable, "-m", "dvc", "config", "--local", key, value], cwd=clone, env=env,
+                       check=True, capture_output=True)
+    return clone
+
+
+def _experiments(root: Path, env: dict[str, str]) -> set[str]:
+    proc = subprocess.run([sys.executable, "-m", "dvc", "exp", "list", "--name-only"], cwd=root, env=env,
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SweepError(f"`dvc exp list` in {root} failed: {proc.stderr.strip() or proc.stdout.strip()}")
+    return set(proc.stdout.split())
+
+
+def _experiment_file(root: Path, commit: str, name: str, path: str) -> str:
+    """``path`` as experiment ``name`` (of baseline ``commit``) holds it; '' when it has none."""
+    ref = f"refs/exps/{commit[:2]}/{commit[2:]}/{name}"
+    proc = subprocess.run(["git", "show", f"{ref}:{path}"], cwd=root, capture_output=True, text=True)
+    return proc.stdout if proc.returncode == 0 else ""
+
+
+def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
+    """Sweep every point of ``--set`` (:mod:`lfdt.sweep.points`) and record each in ``root`` as a DVC experiment
+    named after its params; returns a summary. ``kwargs`` go to :func:`run_sweep` (the chains of all points run on
+    the same cluster, one point after another).
+
+    A point whose chains failed is reported by name and the others go on; rerunning the same command skips the
+    points already recorded and, in a point that failed, the chains that finished. SweepError at the end when any
+    point failed, or when recording one had to run a stage (every stage must come from the run cache).
+    """
+    start = time.monotonic()
+    root = root.resolve()
+    commit = check_workspace(root)
+    env = stage_env(root, tracking_env(kwargs.get("forward_env") or []))
+    points = expand((root / "params.yaml").read_text(), sets)
+    remote.configure(root)
+    recorded = _experiments(root, env)
+    done = [p.name for p in points if p.name in recorded]
+    if done:
+        print(f"{len(done)} of {len(points)} points are experiments already, not run again: {', '.join(done)}")
+    failed: dict[str, str] = {}
+    ran_points = []
+    for i, point in enumerate(points, 1):
+        if point.name in recorded:
+            continue
+        print(f"point {i}/{len(points)} ({point.name}): {point.describe()}", flush=True)
+        clone = _point_clone(root, commit, point, env)
+        try:
+            summary = run_sweep(clone, remote, state_dir=root / ".dvc" / "tmp" / "sweep", final=False, **kwargs)
+        except SweepError as err:
+            print(f"point {point.name} FAILED: {err}", flush=True)
+            failed[point.name] = str(err)
+            continue
+        # the experiment: shared and chain stages restored from the run cache the point's sweep filled, the final
+        # stages (reports) built
+        out = _dvc_streamed(root, env, "exp", "run", "--temp", "-n", point.name, *point.set_args())
+        ran = sorted(set(RAN.findall(out)) - set(summary["final"]))
+        if ran:
+            failed[point.name] = (f"recording it as an experiment ran {len(ran)} stages ({', '.join(ran[:5])}) "
+                                  f"instead of restoring them from the run cache: its params differ from the "
+                                  f"swept ones")
+            continue
+        shutil.rmtree(clone, ignore_errors=True)
+        ran_points.append(point.name)
+    tables = {p.name: _experiment_file(root, commit, p.name, TABLE) for p in points if p.name not in failed}
+    if any(tables.values()):
+        print(f"\nTable I of each point ({TABLE} of its experiment; success rate [95 % interval], seeds):\n"
+              + compare({k: v for k, v in tables.items() if v}), flush=True)
+    if failed:
+        raise SweepError(f"{len(failed)} of {len(points)} points failed: "
+                         + "; ".join(f"{n}: {e}" for n, e in failed.items())
+                         + ". Rerun the same command: recorded points and finished chains are kept")
+    return {"commit": commit, "points_run": ran_points, "points_skipped": done, "wall_s": time.monotonic() - start}
 
 
 def describe(plan: Plan) -> str:
