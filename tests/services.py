@@ -201,7 +201,7 @@ def ray_cluster(logs: Path, workers: int = 1, env: dict[str, str] | None = None)
                  log=logs / "ray-worker0.log")
         yield address
     finally:
-        stop_all(procs)
+        stop_all(procs, timeout=3)  # nothing of a test cluster needs keeping: a short grace, then SIGKILL
         shutil.rmtree(temp, ignore_errors=True)
 
 

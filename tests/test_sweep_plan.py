@@ -89,6 +89,9 @@ def test_set_expands_every_combination_into_valid_params_with_comments_kept():
     assert len(changed) == 2 and all("# " in b for _, b in changed)  # only those two lines, comments kept
     assert pts[3].set_args() == ["-S", "grid.seeds=[3, 4, 5, 6, 7, 8]", "-S", "translator.lambda_dyn=1"]
     assert points.expand(base, ["grid.seeds=[3,4,5]"])[0].params_yaml == base  # the workspace's own values
+    # a key with one value is common to every point: names show only the keys that tell the points apart
+    two = points.expand(base, ["grid.demos=[100]", "grid.seeds=[3,4,5],[3,4,5,6]"])
+    assert [p.name.rsplit("-", 1)[0] for p in two] == ["seeds-3.4.5", "seeds-3.4.5.6"]
 
 
 @pytest.mark.parametrize(("sets", "match"), [

@@ -211,8 +211,10 @@ def _point_clone(root: Path, commit: str, point: Point, env: dict[str, str]) -> 
     (clone / "params.yaml").write_text(point.params_yaml)
     cache = str(root / ".dvc" / "cache")
     for key, value in (("cache.dir", cache), ("cache.type", "reflink,hardlink,copy")):
-        subprocess.run([sys.executable, "-m", "dvc", "config", "--local", key, value], cwd=clone, env=env,
-                       check=True, capture_output=True)
+        proc = subprocess.run([sys.executable, "-m", "dvc", "config", "--local", key, value], cwd=clone, env=env,
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise SweepError(f"`dvc config --local {key} {value}` in {clone} failed: {proc.stderr.strip()}")
     return clone
 
 
@@ -265,7 +267,12 @@ def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
             continue
         # the experiment: shared and chain stages restored from the run cache the point's sweep filled, the final
         # stages (reports) built
-        out = _dvc_streamed(root, env, "exp", "run", "--temp", "-n", point.name, *point.set_args())
+        try:
+            out = _dvc_streamed(root, env, "exp", "run", "--temp", "-n", point.name, *point.set_args())
+        except SweepError as err:
+            print(f"point {point.name} FAILED: {err}", flush=True)
+            failed[point.name] = str(err)
+            continue
         ran = sorted(set(RAN.findall(out)) - set(summary["final"]))
         if ran:
             failed[point.name] = (f"recording it as an experiment ran {len(ran)} stages ({', '.join(ran[:5])}) "

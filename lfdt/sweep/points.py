@@ -34,6 +34,8 @@ class Point:
     """(dotted key, value) pairs, in the order the ``--set`` arguments gave the keys."""
     params_yaml: str
     """The full params.yaml of this point (the workspace's, comments kept, with the overrides applied)."""
+    named_by: tuple[str, ...] = ()
+    """The keys its name shows: those whose value differs between the points of its sweep (all when none does)."""
 
     @property
     def key(self) -> str:
@@ -42,9 +44,10 @@ class Point:
 
     @property
     def name(self) -> str:
-        """The DVC experiment name: the last part of each key and its value, then the key
-        (e.g. ``lambda_dyn-0.5-3fa2c1``)."""
-        parts = [f"{k.rsplit('.', 1)[-1]}-{_compact(v)}" for k, v in self.overrides]
+        """The DVC experiment name: the last part of each key that tells the points apart and its value, then the
+        key (e.g. ``lambda_dyn-0.5-3fa2c1``)."""
+        shown = self.named_by or tuple(k for k, _ in self.overrides)
+        parts = [f"{k.rsplit('.', 1)[-1]}-{_compact(v)}" for k, v in self.overrides if k in shown]
         readable = re.sub(r"[^A-Za-z0-9_.-]+", "_", "-".join(parts)).strip("._-")[:60].rstrip("._-")
         return f"{readable}-{self.key}" if readable else f"point-{self.key}"
 
@@ -140,10 +143,11 @@ def expand(params_yaml: str, sets: list[str]) -> list[Point]:
     """Every combination of the ``--set`` values, each a point (in the order of the arguments, last key fastest)."""
     parsed = parse_sets(sets)
     keys = [k for k, _ in parsed]
+    varying = tuple(k for k, values in parsed if len(values) > 1)
     points = []
     for combo in itertools.product(*(values for _, values in parsed)):
         overrides = tuple(zip(keys, combo, strict=True))
-        points.append(Point(overrides, apply(params_yaml, overrides)))
+        points.append(Point(overrides, apply(params_yaml, overrides), varying))
     if len({p.params_yaml for p in points}) < len(points):
         raise PointError("--set gives the same value twice for a key: each point must differ")
     return points

@@ -10,6 +10,7 @@ that a restore would trust.
 from __future__ import annotations
 
 import contextlib
+import logging
 from pathlib import Path
 
 from lfdt.errors import StageError
@@ -17,6 +18,17 @@ from lfdt.errors import StageError
 
 class PublishError(StageError):
     """Objects of a run record could not be sent to the remote."""
+
+
+@contextlib.contextmanager
+def _quiet_dvc():
+    log = logging.getLogger("dvc")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def _entries(repo) -> list[tuple[str, str]]:
@@ -44,7 +56,8 @@ def publish(root: str | Path, remote: str) -> int:
         ready, objs = [], set()
         for entry in _entries(repo):
             try:
-                used = repo.stage_cache.get_used_objs([entry])
+                with _quiet_dvc():  # a record whose objects this cache lacks is skipped, not worth a warning
+                    used = repo.stage_cache.get_used_objs([entry])
             except CollectCacheError:
                 continue
             hashes = {h for hs in used.values() for h in hs}
