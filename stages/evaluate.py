@@ -11,6 +11,7 @@ from lfdt.jobs.evaluate import evaluate_job
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.METHODS)
     cfgs = common.configs(method, demos, p.grid.seeds, params_path)
+    (common.VIDEOS / cfgs[0].group).mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos
     results = parallel.run_jobs(evaluate_job, cfgs, p.grid.workers, total=p.evaluation.trials * len(cfgs),
                                 desc=f"evaluate {cfgs[0].group}", unit="trial")
     out = Path("reports/eval")

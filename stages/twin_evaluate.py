@@ -23,14 +23,15 @@ def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
 def run() -> None:
     task, all_params = stage.task_arguments(__doc__, tasks.NAMES)
     p = all_params.twin
+    video_root = Path("reports/twin/videos") / task
+    video_root.mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos or the real robots' logs
     with mlflow_runs.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
                             tags={"task": task, "backend": p.backend},
                             run_name=f"{task} twin_evaluate") as run:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
-            rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task,
-                                          video_root=Path("reports/twin/videos") / task)
+            rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task, video_root=video_root)
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}
         counts = {m: sum(r["method"] == m for r in rows) for m in twin.METHODS}
         run.metrics({f"{m}/successes": v for m, v in summary.items()})
