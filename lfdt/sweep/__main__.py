@@ -71,8 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.sets:
             summary = run_points(root, args.sets, remote, **options)
             print(f"sweep done in {summary['wall_s']:.0f} s: {len(summary['points_run'])} points recorded as "
-                  f"experiments ({', '.join(summary['points_run']) or 'none new'}); `dvc exp show --only-changed` "
-                  f"compares them, `dvc exp apply <name>` brings one into the workspace")
+                  f"experiments ({', '.join(summary['points_run']) or 'none new'}); `dvc exp apply <name>` brings "
+                  f"one into the workspace")
             return 0
         summary = run_sweep(root, remote, only=args.chains, **options)
     except StageError as err:

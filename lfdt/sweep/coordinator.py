@@ -21,6 +21,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
+from lfdt import mlflow_runs
 from lfdt.errors import StageError
 from lfdt.files import temp_path
 from lfdt.sweep import runcache
@@ -113,8 +114,8 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
 
     ``state_dir`` holds the record of finished chains and the logs of failed ones (default ``root``'s
     ``.dvc/tmp/sweep``; the points of ``--set`` keep theirs in the workspace's, so a point with the params of an
-    earlier sweep there reruns no chain). Without ``final`` the last `dvc repro` restores the chains' stages (their
-    objects come into the cache) but builds none of the final stages: a point's experiment builds those.
+    earlier sweep there reruns no chain). Without ``final`` the sweep ends when the chains' run records are in
+    ``root``'s cache, before the last `dvc repro`: a point's experiment restores the chains and builds the rest.
 
     SweepError when a chain failed (named, with the end of its log; the rest are kept) or when the final
     `dvc repro` had to run a chain's stage itself.
@@ -125,6 +126,9 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
     root = root.resolve()
     commit = check_workspace(root)
     extra = tracking_env(forward_env or [])
+    # the experiment and its tags exist before any stage starts: stages of two chains that both find them missing
+    # on a fresh server race to create them, and the server's database refuses the second (seen on PostgreSQL)
+    mlflow_runs.experiment_id()
     env = stage_env(root, extra)
     remote.configure(root)
     params_yaml = (root / "params.yaml").read_text()
@@ -185,8 +189,11 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
                 "wall_s": time.monotonic() - start}
 
     runcache.fetch(root, remote.name)
+    if not final:
+        return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": [],
+                "final": plan.final, "wall_s": time.monotonic() - start}
     chain_stages = [s for stages in plan.chains.values() for s in stages]
-    out = _dvc_streamed(root, env, "repro", "--pull", *([] if final else chain_stages))
+    out = _dvc_streamed(root, env, "repro", "--pull")
     ran = RAN.findall(out)
     rerun = sorted(set(ran) & set(chain_stages))
     if rerun:
@@ -265,10 +272,10 @@ def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
             print(f"point {point.name} FAILED: {err}", flush=True)
             failed[point.name] = str(err)
             continue
-        # the experiment: shared and chain stages restored from the run cache the point's sweep filled, the final
-        # stages (reports) built
+        # the experiment: shared and chain stages restored from the run records the point's sweep fetched (their
+        # objects pulled from the remote where the cache lacks them), the final stages (reports) built
         try:
-            out = _dvc_streamed(root, env, "exp", "run", "--temp", "-n", point.name, *point.set_args())
+            out = _dvc_streamed(root, env, "exp", "run", "--temp", "--pull", "-n", point.name, *point.set_args())
         except SweepError as err:
             print(f"point {point.name} FAILED: {err}", flush=True)
             failed[point.name] = str(err)
