@@ -49,22 +49,12 @@ def wait_for(ok: Callable[[], bool], what: str, proc: subprocess.Popen | None = 
 
 def stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
     """Stop a server started with ``start_new_session``: its whole process group, by the leader's id."""
-    if proc.poll() is None or _group_alive(proc.pid):
-        for sig in (signal.SIGTERM, signal.SIGKILL):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, sig)
-            deadline = time.monotonic() + timeout
-            while time.monotonic() < deadline and _group_alive(proc.pid):
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    proc.wait(timeout=0.2)
-            if not _group_alive(proc.pid):
-                break
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        proc.wait(timeout=5)
+    stop_all([proc], timeout)
 
 
 def stop_all(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
-    """Stop several servers at once (each by its process group): SIGTERM to all, then SIGKILL to what is left."""
+    """Stop several servers at once (each by its process group): SIGTERM to all, ``timeout`` seconds for them to go,
+    then SIGKILL to what is left."""
     for sig in (signal.SIGTERM, signal.SIGKILL):
         alive = [p for p in procs if p.poll() is None or _group_alive(p.pid)]
         for p in alive:
@@ -73,11 +63,12 @@ def stop_all(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
         deadline = time.monotonic() + timeout
         while alive and time.monotonic() < deadline:
             for p in alive:
-                p.poll()
+                p.poll()  # reaps a leader that exited, so its group can count as gone
             alive = [p for p in alive if _group_alive(p.pid)]
             time.sleep(0.1)
     for p in procs:
-        stop(p)  # reaps the leader; a no-op for a group already gone
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            p.wait(timeout=5)
 
 
 def _group_alive(pgid: int) -> bool:

@@ -8,6 +8,7 @@ failed or never finished.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -184,14 +185,15 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
         names = ", ".join(f"{r.name} ({r.error})" for r in failed)
         raise SweepError(f"{len(failed)} of {len(plan.chains)} chains failed: {names}. Their logs are in {logs}; "
                          f"rerun the same command to run only them (finished chains are kept)")
-    if only:
-        return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": [],
-                "wall_s": time.monotonic() - start}
+    def summary(final_ran: list[str]) -> dict:
+        return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": final_ran,
+                "final": plan.final, "wall_s": time.monotonic() - start}
 
+    if only:
+        return summary([])
     runcache.fetch(root, remote.name)
     if not final:
-        return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": [],
-                "final": plan.final, "wall_s": time.monotonic() - start}
+        return summary([])
     chain_stages = [s for stages in plan.chains.values() for s in stages]
     out = _dvc_streamed(root, env, "repro", "--pull")
     ran = RAN.findall(out)
@@ -199,11 +201,10 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
     if rerun:
         raise SweepError(f"the final `dvc repro` ran {len(rerun)} chain stages itself ({', '.join(rerun[:5])}): "
                          f"their run records or objects are missing from the remote {remote.name!r}")
-    return {"commit": commit, "chains_run": todo, "chains_skipped": skipped, "final_ran": ran,
-            "final": plan.final, "wall_s": time.monotonic() - start}
+    return summary(ran)
 
 
-def _point_clone(root: Path, commit: str, point: Point, env: dict[str, str]) -> Path:
+def _point_clone(root: Path, commit: str, point: Point) -> Path:
     """The workspace in which ``point`` is swept: a clone of ``root`` at ``commit`` with the point's params.yaml and
     ``root``'s DVC cache (so every output and run record lands where the experiment is recorded). Reused when it
     exists: its sweep state makes a rerun skip the chains that finished."""
@@ -216,12 +217,15 @@ def _point_clone(root: Path, commit: str, point: Point, env: dict[str, str]) -> 
         _git(tmp, "checkout", "--quiet", commit)
         os.replace(tmp, clone)
     (clone / "params.yaml").write_text(point.params_yaml)
-    cache = str(root / ".dvc" / "cache")
-    for key, value in (("cache.dir", cache), ("cache.type", "reflink,hardlink,copy")):
-        proc = subprocess.run([sys.executable, "-m", "dvc", "config", "--local", key, value], cwd=clone, env=env,
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise SweepError(f"`dvc config --local {key} {value}` in {clone} failed: {proc.stderr.strip()}")
+    from dvc.config import ConfigError
+    from dvc.repo import Repo
+
+    try:  # in-process, as Remote.configure: a `dvc config` command per key costs seconds of imports
+        with contextlib.chdir(clone), Repo(str(clone)) as repo, repo.config.edit("local") as conf:
+            conf["cache"]["dir"] = str(root / ".dvc" / "cache")
+            conf["cache"]["type"] = "reflink,hardlink,copy"
+    except ConfigError as err:
+        raise SweepError(f"could not point {clone}'s DVC cache at {root}'s: {err}") from None
     return clone
 
 
@@ -265,7 +269,7 @@ def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
         if point.name in recorded:
             continue
         print(f"point {i}/{len(points)} ({point.name}): {point.describe()}", flush=True)
-        clone = _point_clone(root, commit, point, env)
+        clone = _point_clone(root, commit, point)
         try:
             summary = run_sweep(clone, remote, state_dir=root / ".dvc" / "tmp" / "sweep", final=False, **kwargs)
         except SweepError as err:
