@@ -206,6 +206,40 @@ def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
     return path
 
 
+def headline(table: pd.DataFrame) -> dict:
+    """Table I's success rates as a small nested dict, ``{method: {"d<demos>": rate}}`` (``reports/table1.json``, the
+    metrics file `dvc exp show` and `dvc metrics diff` are read with)."""
+    out: dict = {}
+    for r in table.itertuples():
+        out.setdefault(r.method, {})[f"d{r.demos}"] = round(float(r.success_rate), 4)
+    return out
+
+
+def success_by_method(table: pd.DataFrame) -> pd.DataFrame:
+    """Success rate against demonstrations, one column per method (a DVC plot that overlays the methods)."""
+    wide = table.pivot(index="demos", columns="method", values="success_rate")
+    return wide[[m for m in METHOD_ORDER if m in wide]].reset_index()
+
+
+def curves_by_method(curve_dir: Path, column: str, x: str = "iteration") -> pd.DataFrame:
+    """One learning-curve column of every ``<method>-d<demos>_curve.csv`` in ``curve_dir``, one column per method:
+    the mean over seeds (and ensemble members) at each demo count, then over demo counts (every method has the same
+    ones). A DVC plot of it overlays the methods."""
+    per_method: dict[str, list[pd.Series]] = {}
+    for f in sorted(Path(curve_dir).glob("*_curve.csv")):
+        method = f.name[: -len("_curve.csv")].rsplit("-d", 1)[0]
+        curve = pd.read_csv(f)
+        if column not in curve:
+            raise ValueError(f"{f} has no column {column!r}")
+        per_method.setdefault(method, []).append(curve.dropna(subset=[column]).groupby(x)[column].mean())
+    if not per_method:
+        raise FileNotFoundError(f"no learning curves (*_curve.csv) in {curve_dir}")
+    wide = pd.DataFrame({m: pd.concat(per_method[m], axis=1).mean(axis=1)
+                         for m in METHOD_ORDER if m in per_method})
+    wide.index.name = x
+    return wide.reset_index()
+
+
 DIAGNOSTICS = {
     "selected_iteration": "iteration kept (lowest held-out translation loss)",
     "selected_heldout_loss": "held-out translation loss there",
@@ -245,8 +279,9 @@ def translator_diagnostics(translator_dir: Path, track_dir: Path | None = None) 
     return _ordered(pd.DataFrame(rows)).reset_index(drop=True)
 
 
-def stage_times(reports: Path) -> pd.DataFrame:
-    """Wall time of every stage run that produced the current reports, summed per stage."""
+def stage_times(runs: Path) -> pd.DataFrame:
+    """Wall time of every stage run that produced the current reports, summed per stage, from the stages'
+    bookkeeping files in ``runs/``."""
     rows = []
     sources = {"train_experts": "experts/*_train.json", "collect_random": "random/*.json",
                "collect_demos": "demos/*.json", "fit_dynamics": "dynamics.json",
@@ -254,7 +289,7 @@ def stage_times(reports: Path) -> pd.DataFrame:
                "evaluate": "eval/*.json"}
     for name, pattern in sources.items():
         walls = []
-        for f in sorted(reports.glob(pattern)):
+        for f in sorted(runs.glob(pattern)):
             d = json.loads(f.read_text())
             w = d.get("stage_wall_s", d.get("job_wall_s", d.get("wall_time_s")))
             if w is not None:

@@ -41,6 +41,73 @@ def write_json(path: str | Path, obj: Any) -> Path:
     return path
 
 
+REPORTS = Path("reports")
+RUNS = Path("runs")
+
+
+def is_bookkeeping(key: str) -> bool:
+    """A key that describes how a run went rather than what it measured: MLflow ids, wall times, speeds. Two identical
+    runs differ in these, so they stay out of the metrics files (``reports/``) and go to ``runs/``."""
+    return key.startswith("mlflow_") or "wall" in key or key.endswith("_per_s")
+
+
+def runs_path(metrics_path: str | Path) -> Path:
+    """Where the bookkeeping of a metrics file lives: ``[root/]reports/a/b.json`` -> ``[root/]runs/a/b.json``."""
+    path = Path(metrics_path)
+    parts = path.parts
+    if REPORTS.name not in parts[:-1]:
+        raise StageError(f"{path}: a metrics file must lie under {REPORTS}/ (its bookkeeping goes to {RUNS}/)")
+    i = len(parts) - 1 - parts[:-1][::-1].index(REPORTS.name) - 1
+    return Path(*parts[:i], RUNS.name, *parts[i + 1:])
+
+
+def _split(obj: Any) -> tuple[Any, dict]:
+    """(measured, bookkeeping) of a report; dicts are split key by key at every depth, anything else is measured."""
+    if not isinstance(obj, Mapping):
+        return obj, {}
+    measured, books = {}, {}
+    for k, v in obj.items():
+        if is_bookkeeping(str(k)):
+            books[k] = v
+            continue
+        m, b = _split(v)
+        measured[k] = m
+        if b:
+            books[k] = b
+    return measured, books
+
+
+def write_report(path: str | Path, report: Mapping[str, Any]) -> Path:
+    """Write a stage's report: its measured results to ``path`` (a DVC metric, identical when a run is repeated), its
+    bookkeeping (:func:`is_bookkeeping`) to :func:`runs_path` (a cached DVC output that is not a metric)."""
+    measured, books = _split(report)
+    rp = runs_path(path)
+    rp.parent.mkdir(parents=True, exist_ok=True)
+    write_json(rp, books)
+    return write_json(path, measured)
+
+
+def _merge(a: Any, b: Any) -> Any:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return {**a, **{k: _merge(a.get(k), v) for k, v in b.items()}}
+    return b
+
+
+def read_report(path: str | Path) -> dict:
+    """A report written by :func:`write_report`, its bookkeeping merged back in; a missing file of the two is an
+    error naming it (run the stage that writes it)."""
+    path = Path(path)
+    parts = []
+    for f in (path, runs_path(path)):
+        try:
+            parts.append(json.loads(f.read_text()))
+        except FileNotFoundError:
+            raise StageError(f"{f} is missing: run the stage that writes it (`dvc repro`)") from None
+        except json.JSONDecodeError as err:
+            raise StageError(f"{f} is not valid JSON ({err})") from None
+    return _merge(*parts)
+
+
 def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
     """Write a list of dicts as CSV atomically (DVC plots). The columns are the union of the rows' keys in the order
     they first appear; a row without a column leaves its cell empty (e.g. a curve's rows logged at different

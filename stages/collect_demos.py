@@ -30,7 +30,7 @@ def run() -> None:
         data.check_transitions(out, "demos", args.pairing)
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
-        stage.write_json(Path("reports/demos") / f"{args.pairing}.json",
+        stage.write_report(Path("reports/demos") / f"{args.pairing}.json",
                          {"pairing": args.pairing, **stats, "mlflow_run_id": run.run_id})
     print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "
           f"mean length {stats['mean_demo_length']:.1f} steps")

@@ -24,7 +24,7 @@ def run() -> None:
         stats["file_mb"] = out.stat().st_size / 1e6
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
-        stage.write_json(Path("reports/random") / f"{args.domain}.json",
+        stage.write_report(Path("reports/random") / f"{args.domain}.json",
                          {"domain": args.domain, **stats, "mlflow_run_id": run.run_id})
     print(f"{args.domain}: {stats['transitions']} transitions in {stats['wall_s']:.1f} s "
           f"({stats['transitions_per_s']:.0f}/s)")

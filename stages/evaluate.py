@@ -15,7 +15,7 @@ def run() -> None:
     results = parallel.run_jobs(evaluate_job, cfgs, p.grid.workers, total=p.evaluation.trials * len(cfgs),
                                 desc=f"evaluate {cfgs[0].group}", unit="trial")
     out = Path("reports/eval")
-    stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))
+    stage.write_report(out / f"{cfgs[0].group}.json", stage.group_report(results))
     stage.write_csv(out / f"{cfgs[0].group}_trials.csv", [t for r in results for t in r["trials"]])
     for r in results:
         m = r["metrics"]

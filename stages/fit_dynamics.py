@@ -32,7 +32,7 @@ def run() -> None:
         metrics = {k: v for k, v in res.items() if not isinstance(v, dict)}
         metrics["stage_wall_s"] = stage.wall_since_start()
         metrics["mlflow_run_id"] = run.run_id
-        stage.write_json("reports/dynamics.json", {**metrics, "per_column": {
+        stage.write_report("reports/dynamics.json", {**metrics, "per_column": {
             "forward_mse": res["forward_mse_per_column"], "forward_trivial_mse": res["forward_trivial_mse_per_column"],
             "inverse_mse": res["inverse_mse_per_column"]}})
         stage.write_csv("reports/dynamics_curve.csv", curve)

@@ -1,11 +1,14 @@
-"""DVC stage: Table I (md, csv, tex), per-run CSV, the success-vs-demos plot, translator diagnostics, stage wall
-times, and one MLflow parent run that carries them."""
+"""DVC stage: Table I (md, csv, tex, and its headline rates as the metrics file), per-run CSV, plots that overlay the
+methods, translator diagnostics, stage wall times, and one MLflow parent run that carries them."""
 
 import argparse
 import json
-from pathlib import Path
 
 from lfdt import mlflow_runs, report, stage
+
+# bookkeeping files (runs/) of the runs behind Table I: one run each, or one per seed
+SINGLE_RUNS = ("experts/*_train.json", "random/*.json", "demos/*.json", "dynamics.json")
+SEEDED_RUNS = ("translator/*.json", "track/*.json", "bc/*.json", "eval/*.json")
 
 
 def run() -> None:
@@ -13,7 +16,7 @@ def run() -> None:
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = stage.params(args.params)
-    reports = Path("reports")
+    reports, runs = stage.REPORTS, stage.RUNS
     trials = report.load_trials(reports / "eval")
     expected = {(m, d, s) for m in p.grid.bc_methods for d in p.grid.demos for s in p.grid.seeds}
     keep = [(m, d, s) in expected for m, d, s in zip(trials.method, trials.demos, trials.seed)]
@@ -33,34 +36,42 @@ def run() -> None:
     curves_png = report.plot_translator_curves(reports / "translator", reports / "translator_curves.png")
     diag = report.translator_diagnostics(reports / "translator", reports / "track")
     stage.write_csv(reports / "translator_diagnostics.csv", diag.to_dict("records"))
-    times = report.stage_times(reports)
+    # the top-level plots of dvc.yaml: one chart per quantity, the methods overlaid
+    plots = reports / "plots"
+    plots.mkdir(exist_ok=True)
+    stage.write_csv(plots / "success_by_method.csv", report.success_by_method(table).to_dict("records"))
+    stage.write_csv(plots / "bc_val_loss_by_method.csv",
+                    report.curves_by_method(reports / "bc", "val_loss").to_dict("records"))
+    for name, column in (("translator_heldout_loss", "heldout/selection_loss"), ("translator_dyn_loss", "loss/dyn"),
+                         ("translator_D_accuracy", "D/accuracy")):
+        stage.write_csv(plots / f"{name}_by_method.csv",
+                        report.curves_by_method(reports / "translator", column).to_dict("records"))
+    times = report.stage_times(runs)
     stage.write_csv(reports / "stage_times.csv", times.to_dict("records"))
-    summary = {f"{r.method}/d{r.demos}/success_rate": r.success_rate for r in table.itertuples()}
-    summary["total_stage_wall_s"] = float(times.total_s.sum())
+    headline = report.headline(table)
     # one parent run per pipeline run: it carries the table and plot, and adopts the runs behind them
     children = []
-    for sub in ("experts/*_train.json", "random/*.json", "demos/*.json", "dynamics.json"):
-        for f in sorted(reports.glob(sub)):
-            rid = json.loads(f.read_text()).get("mlflow_run_id")
-            if rid:
-                children.append(rid)
-    for sub in ("translator/*.json", "track/*.json", "bc/*.json", "eval/*.json"):
-        for f in sorted(reports.glob(sub)):
-            for s in json.loads(f.read_text()).get("seeds", {}).values():
-                if s.get("mlflow_run_id"):
-                    children.append(s["mlflow_run_id"])
+    for pattern in SINGLE_RUNS:
+        children += [json.loads(f.read_text()).get("mlflow_run_id") for f in sorted(runs.glob(pattern))]
+    for pattern in SEEDED_RUNS:
+        for f in sorted(runs.glob(pattern)):
+            children += [s.get("mlflow_run_id") for s in json.loads(f.read_text()).get("seeds", {}).values()]
+    children = [c for c in children if c]
+    total_wall = float(times.total_s.sum())
     with mlflow_runs.stage_run("report", {"grid": p.grid.model_dump()}, tags={"pipeline_parent": "true"},
-                            run_name=mlflow_runs.pipeline_run_name("pipeline")) as parent:
-        parent.metrics({k.replace("/", "_"): v for k, v in summary.items()})
+                               run_name=mlflow_runs.pipeline_run_name("pipeline")) as parent:
+        parent.metrics({f"{m}_d{d.removeprefix('d')}_success_rate": v
+                        for m, row in headline.items() for d, v in row.items()})
+        parent.metrics({"total_stage_wall_s": total_wall})
         for f in ("table1.md", "table1.csv", "table1.tex", "table1_runs.csv", "translator_diagnostics.csv",
                   "stage_times.csv"):
             parent.artifact(reports / f)
         parent.artifact(png)
         parent.artifact(curves_png)
         adopted = mlflow_runs.adopt_children(parent.run_id, children)
-        summary["mlflow_parent_run_id"] = parent.run_id
-        summary["mlflow_child_runs"] = adopted
-    stage.write_json(reports / "report.json", summary)
+        parent_id = parent.run_id
+    stage.write_report(reports / "table1.json", {**headline, "mlflow_parent_run_id": parent_id,
+                                                 "mlflow_child_runs": adopted, "total_stage_wall_s": total_wall})
     print(report.markdown(table))
     print(times.to_string(index=False))
 

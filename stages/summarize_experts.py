@@ -2,8 +2,6 @@
 protocol's premise measured: both robots replaying their programs together in Y, nobody adapting."""
 
 import argparse
-import json
-from pathlib import Path
 
 from lfdt import layout, programmed, stage
 
@@ -17,8 +15,8 @@ def run() -> None:
     p = stage.params(args.params)
     out: dict = {"protocol": p.demos.protocol}
     for pairing in layout.PAIRINGS:
-        train = json.loads(Path(f"reports/experts/{pairing}_train.json").read_text())
-        demos = json.loads(Path(f"reports/demos/{pairing}.json").read_text())
+        train = stage.read_report(f"reports/experts/{pairing}_train.json")
+        demos = stage.read_report(f"reports/demos/{pairing}.json")
         out[pairing] = {
             "success_rate": train["success_rate"],
             "episodes": train["episodes"],
@@ -35,7 +33,7 @@ def run() -> None:
         "success_rate": programmed.programs_together_success(p.env, p.demos.program, PREMISE_EPISODES),
         "episodes": PREMISE_EPISODES,
         "description": "both robots replay takes of their own programs together in Y, nobody adapting"}
-    stage.write_json("reports/experts.json", out)
+    stage.write_report("reports/experts.json", out)
     print(f"two programmed robots together in Y: {out['programs_together_in_Y']['success_rate']:.2f} success over "
           f"{PREMISE_EPISODES} start states")
 

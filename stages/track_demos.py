@@ -14,7 +14,7 @@ def run() -> None:
     cfgs = common.configs(method, demos, p.grid.seeds, params_path)
     results = parallel.run_jobs(track_job, cfgs, p.grid.workers, total=2 * demos * len(cfgs),
                                 desc=f"re-execute {cfgs[0].group}", unit="demo")
-    stage.write_json(Path("reports/track") / f"{cfgs[0].group}.json", stage.group_report(results))
+    stage.write_report(Path("reports/track") / f"{cfgs[0].group}.json", stage.group_report(results))
     for r in results:
         m = r["metrics"]
         print(f"{cfgs[0].group} seed {m['seed']}: {m['successful_executions']}/{m['executions']} executions succeed")

@@ -14,7 +14,7 @@ def run() -> None:
     results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
                                 desc=f"BC {cfgs[0].group}")
     out = Path("reports/bc")
-    stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))
+    stage.write_report(out / f"{cfgs[0].group}.json", stage.group_report(results))
     stage.write_csv(out / f"{cfgs[0].group}_curve.csv", [c for r in results for c in r["curve"]])
 
 

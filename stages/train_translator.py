@@ -15,7 +15,7 @@ def run() -> None:
     results = parallel.run_jobs(translator_job, cfgs, p.grid.workers, total=iters * len(cfgs),
                                 desc=f"translator {cfgs[0].group}")
     out = Path("reports/translator")
-    stage.write_json(out / f"{cfgs[0].group}.json", stage.group_report(results))
+    stage.write_report(out / f"{cfgs[0].group}.json", stage.group_report(results))
     # held-out losses are measured every select_every iterations, diagnostics every log_every
     stage.write_csv(out / f"{cfgs[0].group}_curve.csv", [c for r in results for c in r["curve"]])
     for r in results:

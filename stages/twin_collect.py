@@ -16,7 +16,7 @@ def run() -> None:
         flat = {f"{s}/{k}/{kk}": vv for s, per in stats.items() for k, v in per.items() for kk, vv in v.items()
                 if isinstance(vv, int | float)}
         run.metrics(flat)
-        stage.write_json(Path("reports/twin") / f"{task}_data.json",
+        stage.write_report(Path("reports/twin") / f"{task}_data.json",
                          {"task": task, "backend": p.backend, **stats, "stage_wall_s": stage.wall_since_start(),
                           "mlflow_run_id": run.run_id})
     for s, per in stats.items():

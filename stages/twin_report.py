@@ -54,7 +54,7 @@ def run() -> None:
     children = []
     for task in p.tasks:
         for kind in ("data", "train", "eval"):
-            rep = json.loads(Path(f"reports/twin/{task}_{kind}.json").read_text())
+            rep = stage.read_report(f"reports/twin/{task}_{kind}.json")
             children += [rep["mlflow_run_id"]] if "mlflow_run_id" in rep else []
             children += [s["mlflow_run_id"] for s in rep.get("seeds", {}).values() if "mlflow_run_id" in s]
     params = {"twin": {"seeds": p.seeds, "trials": p.trials, "backend": p.backend}}

@@ -21,7 +21,7 @@ def run() -> None:
             per_seed[str(seed)] = {**res, "mlflow_run_id": run.run_id}
         print(f"{task} seed {seed}: dynamics F ratio {res['dynamics']['forward_ratio']:.3f}, "
               f"F^-1 ratio {res['dynamics']['inverse_ratio']:.3f}")
-    stage.write_json(Path("reports/twin") / f"{task}_train.json",
+    stage.write_report(Path("reports/twin") / f"{task}_train.json",
                      {"task": task, "seeds": per_seed, "stage_wall_s": stage.wall_since_start()})
 
 

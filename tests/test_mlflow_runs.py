@@ -142,3 +142,29 @@ def test_commit_is_dirty_only_when_source_differs(tmp_path):
     assert not mlflow_runs.git_commit(tmp_path).endswith("-dirty")
     (tmp_path / "lfdt/a.py").write_text("2\n")
     assert mlflow_runs.git_commit(tmp_path).endswith("-dirty")
+
+
+def test_a_refused_duplicate_experiment_tag_is_fine_when_the_tag_holds(tmp_path, monkeypatch):
+    """Two stages on a fresh tracking server both set the experiment's kind tag; the server's database refuses the
+    second insert. That is no error when the tag now holds our value, and stays one when it does not."""
+    from mlflow.exceptions import MlflowException
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    client = mlflow.MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    exp = client.create_experiment("lfdt")
+    real = mlflow.MlflowClient.set_experiment_tag
+
+    def racing(self, experiment_id, key, value):  # the other stage's insert lands first, ours is refused
+        real(self, experiment_id, key, value)
+        raise MlflowException("duplicate key value violates unique constraint \"experiment_tag_pk\"")
+
+    monkeypatch.setattr(mlflow.MlflowClient, "set_experiment_tag", racing)
+    assert mlflow_runs.experiment_id("lfdt") == exp
+
+    def refused(self, experiment_id, key, value):
+        raise MlflowException("permission denied")
+
+    client.delete_experiment_tag(exp, mlflow_runs.EXPERIMENT_KIND_TAG)
+    monkeypatch.setattr(mlflow.MlflowClient, "set_experiment_tag", refused)
+    with pytest.raises(MlflowException, match="permission denied"):
+        mlflow_runs.experiment_id("lfdt")

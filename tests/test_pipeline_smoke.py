@@ -17,7 +17,7 @@ import pytest
 import smoke
 import yaml
 
-from lfdt import data, layout, methods
+from lfdt import data, layout, methods, stage
 
 _dvc = smoke.dvc
 
@@ -42,8 +42,8 @@ def test_every_stage_ran(project):
                for t in ("block_push", "peg_insertion")]
     stages += [f"train_translator@{m}-3" for m in TRANSLATORS]
     stages += [f"{s}@{m}-3" for s in ("train_bc", "evaluate") for m in METHODS]
-    for stage in stages:
-        assert f"'{stage}'" in out
+    for name in stages:
+        assert f"'{name}'" in out
 
 
 def test_artifact_schemas(project):
@@ -133,9 +133,49 @@ def test_second_half_artifacts(project):
     assert (dst / "reports/success_vs_demos.png").stat().st_size > 5000
     assert (dst / "reports/translator_curves.png").stat().st_size > 5000
     assert (dst / "reports/translator_diagnostics.csv").read_text().startswith("method,demos,seeds")
-    rep = json.loads((dst / "reports/report.json").read_text())
+    rep = json.loads((dst / "runs/table1.json").read_text())
     per_seed = len(TRANSLATORS) + 1 + 2 * len(METHODS)  # translators, re-execution, BC and evaluation
     assert rep["mlflow_child_runs"] == 2 + 3 + 2 + 1 + per_seed * len(SEEDS)  # every run behind the table
+    headline = json.loads((dst / "reports/table1.json").read_text())
+    assert set(headline) == set(METHODS) and all(set(v) == {"d3"} for v in headline.values())
+    rows = {r.split(",")[0]: r.split(",") for r in table[1:]}
+    header = table[0].split(",")
+    for m in METHODS:
+        assert headline[m]["d3"] == round(float(rows[m][header.index("success_rate")]), 4)
+
+
+def test_metrics_hold_no_bookkeeping(project):
+    """Run ids, wall times and speeds live in runs/, never in a metrics file (an identical rerun must not change
+    one); every metrics file of dvc.yaml has its bookkeeping twin."""
+    dst, _ = project
+
+    def keys(obj):
+        if isinstance(obj, dict):
+            for k, v in obj.items():
+                yield k
+                yield from keys(v)
+
+    shown = json.loads(_dvc(["metrics", "show", "--json"], dst))
+    files = [f for rev in shown.values() for f in rev.get("data", {})]
+    assert "reports/table1.json" in files and len(files) > 20
+    for f in files:
+        bad = [k for k in keys(json.loads((dst / f).read_text())) if stage.is_bookkeeping(k)]
+        assert not bad, f"{f} holds bookkeeping keys {bad}"
+        assert (dst / stage.runs_path(f)).is_file(), f
+    merged = stage.read_report(dst / "reports/eval/lfdt-d3.json")
+    assert all(s["mlflow_run_id"] and "success_rate" in s for s in merged["seeds"].values())
+    assert merged["stage_wall_s"] > 0 and merged["method"] == "lfdt"
+
+
+def test_overlay_plots(project):
+    """dvc.yaml's top-level plots put every method in one chart per quantity."""
+    dst, _ = project
+    shown = json.loads(_dvc(["plots", "show", "--json"], dst))["data"]
+    for name, want in (("success_by_method", METHODS), ("bc_val_loss_by_method", METHODS),
+                       ("translator_heldout_loss_by_method", TRANSLATORS),
+                       ("translator_dyn_loss_by_method", TRANSLATORS)):
+        spec = shown[f"reports/plots/{name}.csv"][0]["content"]
+        assert {v["field"] for v in spec["data"]["values"]} == set(want), name
 
 
 def _free_port() -> int:

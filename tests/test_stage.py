@@ -39,3 +39,38 @@ def test_a_diverging_loss_stops_training_with_a_clear_error():
     task = bc.BCTask("pi", ["a", "b"], ["u"], frame)
     with pytest.raises(TrainingDiverged, match=r"the BC loss is nan at iteration \d+: training diverged"):
         bc.train_member(task, BCConfig(hidden=[8], iterations=50, eval_every=10, batch_size=64), seed=0)
+
+
+def test_a_report_is_split_into_measured_results_and_bookkeeping(tmp_path):
+    import json
+
+    metrics = tmp_path / "reports" / "bc" / "lfdt-d50.json"
+    metrics.parent.mkdir(parents=True)
+    report = {"method": "lfdt", "stage_wall_s": 12.5,
+              "seeds": {"3": {"success_rate": 0.5, "mlflow_run_id": "abc", "job_wall_s": 3.0, "iterations_per_s": 9.0},
+                        "4": {"success_rate": 0.25}}}
+    stage.write_report(metrics, report)
+    measured = json.loads(metrics.read_text())
+    books = json.loads((tmp_path / "runs" / "bc" / "lfdt-d50.json").read_text())
+    assert measured == {"method": "lfdt", "seeds": {"3": {"success_rate": 0.5}, "4": {"success_rate": 0.25}}}
+    assert books == {"stage_wall_s": 12.5, "seeds": {"3": {"mlflow_run_id": "abc", "job_wall_s": 3.0,
+                                                              "iterations_per_s": 9.0}}}
+    assert stage.read_report(metrics) == report
+    # the same results from a second run (other ids and times): the metrics file is byte-identical
+    before = metrics.read_bytes()
+    stage.write_report(metrics, {**report, "stage_wall_s": 99.0})
+    assert metrics.read_bytes() == before
+
+
+def test_a_report_outside_reports_or_without_its_bookkeeping_is_refused(tmp_path):
+    import pytest
+
+    from lfdt.errors import StageError
+
+    with pytest.raises(StageError, match="must lie under reports/"):
+        stage.write_report(tmp_path / "data" / "x.json", {"a": 1})
+    metrics = tmp_path / "reports" / "x.json"
+    metrics.parent.mkdir()
+    metrics.write_text("{}")
+    with pytest.raises(StageError, match=r"runs/x\.json is missing"):
+        stage.read_report(metrics)

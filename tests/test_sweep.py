@@ -63,7 +63,7 @@ def _sweep(coord: Path, cluster: Cluster, *extra: str, background: bool = False)
 
 def _run_ids(root: Path) -> set[str]:
     ids = set()
-    for f in (root / "reports").rglob("*.json"):
+    for f in (root / "runs").rglob("*.json"):
         obj = json.loads(f.read_text())
         seeds = obj.get("seeds") if isinstance(obj.get("seeds"), dict) else {}
         for rec in [obj, *seeds.values()]:
@@ -163,7 +163,7 @@ def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smok
 
     # the tracking server holds every run behind the reports, each adopted by the report's parent run
     client = mlflow.MlflowClient(cluster.mlflow)
-    parent = json.loads((coord / "reports/report.json").read_text())["mlflow_parent_run_id"]
+    parent = json.loads((coord / "runs/table1.json").read_text())["mlflow_parent_run_id"]
     ids = _run_ids(coord) - {parent}
     assert len(ids) >= len(plan.chains)
     for rid in ids:

@@ -33,7 +33,7 @@ def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
         summary = {"pairing": pairing, "protocol": demos_cfg.protocol, **ev, **stats,
                    "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
         experts.save_expert(model, out, pairing, env_cfg, cfg, demos_cfg, {"evaluation": ev, "training": stats})
-        stage.write_json(EXPERT_REPORTS / f"{pairing}_train.json", summary)
+        stage.write_report(EXPERT_REPORTS / f"{pairing}_train.json", summary)
         stage.write_csv(EXPERT_REPORTS / f"{pairing}_curve.csv",
                         [{"timesteps": c["timesteps"], "success_rate": c["train/success_rate_last100"],
                           "episode_return": c["train/episode_return_last100"]} for c in curve])
