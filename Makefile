@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: help setup reproduce test lint smoke benchmarks mlflow-ui clean-venv
+.PHONY: help setup reproduce test lint smoke benchmarks mlflow-ui ui-check clean-venv
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 14
@@ -29,7 +29,7 @@ smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a tem
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q tests/test_pipeline_smoke.py
 
 lint: setup  ## ruff
-	$(BIN)/ruff check lfdt stages tests benchmarks
+	$(BIN)/ruff check lfdt stages tests benchmarks tools
 
 benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/results/, numbers in the README)
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/collect_throughput.py
@@ -37,8 +37,12 @@ benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/re
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/parallel_speedup.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/sweep_vs_repro.py
 
-mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000
+mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000 (prints the URLs of Table I's views first)
+	$(BIN)/python -m lfdt.mlflow_views --ui http://127.0.0.1:5000
 	$(BIN)/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
+
+ui-check: setup  ## open the MLflow views in headless Chromium, check what they show, screenshots in docs/mlflow-ui/
+	$(BIN)/python tools/mlflow_ui_check.py
 
 clean-venv:
 	rm -rf $(VENV)

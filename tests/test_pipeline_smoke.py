@@ -312,3 +312,34 @@ def test_temp_experiment_logs_to_the_workspace_store(project):
     assert new, "the --temp experiment's runs are not in the workspace's mlflow.db"
     assert {r["exp"] for r in new} == {"smoke-temp"}
     assert not list((dst / ".dvc/tmp/exps").glob("**/mlflow.db"))
+
+
+def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
+    """Each shared view of lfdt.mlflow_views finds runs of the pipeline, and every column it shows is a param or
+    metric some of those runs log (a renamed metric would leave an empty column in the UI); Table I's runs log all of
+    them."""
+    import mlflow
+
+    from lfdt import mlflow_views
+
+    dst, _ = project
+    uri = f"sqlite:///{dst / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    exp_id, urls = mlflow_views.install()
+    client = mlflow.MlflowClient(uri)
+    tags = client.get_experiment(exp_id).tags
+    assert len(urls) == len(mlflow_views.VIEWS)
+    for frag, view in urls.items():
+        assert frag == (f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&workflowType=machine_learning")
+        state = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + view.key])
+        runs = client.search_runs([exp_id], state["searchFilter"], max_results=500)
+        assert runs, view.key
+        for col in state["selectedColumns"]:
+            kind, name = col.split(".", 1)
+            name = name.strip("`")
+            have = [name in (r.data.params if kind == "params" else r.data.metrics) for r in runs]
+            assert all(have) if view.key == "lfdt-table1" else any(have), f"{view.key}: runs lack {col}"
+    table1 = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-table1"])
+    assert len(client.search_runs([exp_id], table1["searchFilter"], max_results=500)) >= len(METHODS) * len(SEEDS)
+    pipelines = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-pipelines"])
+    assert {f"metrics.`{m}_d3_success_rate`" for m in METHODS} <= set(pipelines["selectedColumns"])
