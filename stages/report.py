@@ -4,7 +4,7 @@ methods, translator diagnostics, stage wall times, and one MLflow parent run tha
 import argparse
 import json
 
-from lfdt import mlflow_runs, report, stage
+from lfdt import mlflow_runs, mlflow_views, report, stage
 
 # bookkeeping files (runs/) of the runs behind Table I: one run each, or one per seed
 SINGLE_RUNS = ("experts/*_train.json", "random/*.json", "demos/*.json", "dynamics.json")
@@ -70,6 +70,7 @@ def run() -> None:
         parent.artifact(curves_png)
         adopted = mlflow_runs.adopt_children(parent.run_id, children)
         parent_id = parent.run_id
+    mlflow_views.install()  # the UI's views of these runs (README: MLflow), after the parent run they show
     stage.write_report(reports / "table1.json", {**headline, "mlflow_parent_run_id": parent_id,
                                                  "mlflow_child_runs": adopted, "total_stage_wall_s": total_wall})
     print(report.markdown(table))

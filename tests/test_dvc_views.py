@@ -14,7 +14,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _readme_filters() -> list[str]:
-    filters = re.findall(r"^dvc exp show --drop '\.\*' --keep '([^']+)'", (ROOT / "README.md").read_text(), re.M)
+    """The filters of the README's "DVC views" section."""
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("### DVC views"):]
+    section = section[:section.index("\n#", 1)]
+    filters = re.findall(r"^dvc exp show --drop '\.\*' --keep '([^']+)'", section, re.M)
     assert len(filters) >= 2, "the README gives no `dvc exp show` filter"
     return filters
 
