@@ -54,9 +54,17 @@ class View:
     """If set, every metric of the shown runs whose name ends so is added as a column (the parent run's
     ``<method>_d<demos>_success_rate``, which depend on ``grid``)."""
 
-    def search_filter(self) -> str:
+    def search_filter(self, parent: str | None = None) -> str:
+        """MLflow's search filter of the view; with ``parent``, only that pipeline run's children (the runs behind
+        the current Table I, not those of earlier runs of the pipeline)."""
         parts = [f"tags.`lfdt.stage` = '{self.stage}'"] + ([self.extra_filter] if self.extra_filter else [])
+        if parent and self.stage != "report":
+            parts.append(f"tags.`mlflow.parentRunId` = '{parent}'")
         return " AND ".join(parts)
+
+    def search_order(self) -> str:
+        """The view's sort order in MLflow's search syntax (``params.method ASC``)."""
+        return f"{self.order_by.replace('`', '')} {'ASC' if self.ascending else 'DESC'}"
 
 
 IDS = [param("method"), param("demos"), param("seed")]
@@ -77,27 +85,37 @@ VIEWS = [
 """The views written into the tracking store, in the order they are printed."""
 
 
-def _state(view: View, client, experiment_id: str) -> dict:
+def _state(view: View, client, experiment_id: str, parent: str | None) -> dict:
     columns = list(view.columns)
     if view.metric_suffix:
-        runs = client.search_runs([experiment_id], view.search_filter(), max_results=50)
+        runs = client.search_runs([experiment_id], view.search_filter(parent), max_results=50)
         found = sorted({k for r in runs for k in r.data.metrics if k.endswith(view.metric_suffix)})
         columns += [metric(k) for k in found]
     return {"selectedColumns": columns, "orderByKey": view.order_by, "orderByAsc": view.ascending,
-            "searchFilter": view.search_filter()}
+            "searchFilter": view.search_filter(parent)}
 
 
-def install(experiment: str | None = None) -> tuple[str, dict[str, View]]:
-    """Write every view into the current tracking store's experiment; returns the experiment id and the views by
-    their URL fragment (``#/experiments/<id>/runs?viewStateShareKey=<key>&workflowType=machine_learning``)."""
+def latest_pipeline_run(client, experiment_id: str) -> str | None:
+    """Id of the newest pipeline parent run (the report stage's), or None before the first."""
+    runs = client.search_runs([experiment_id], "tags.`lfdt.stage` = 'report'", max_results=1,
+                              order_by=["attributes.start_time DESC"])
+    return runs[0].info.run_id if runs else None
+
+
+def install(experiment: str | None = None) -> tuple[str, dict[str, tuple[View, dict]]]:
+    """Write every view into the current tracking store's experiment, each showing the runs behind the newest
+    pipeline run; returns the experiment id and, by URL fragment
+    (``#/experiments/<id>/runs?viewStateShareKey=<key>&workflowType=machine_learning``), each view and its state."""
     import mlflow
 
     exp_id = mlflow_runs.experiment_id(experiment)
     client = mlflow.MlflowClient()
+    parent = latest_pipeline_run(client, exp_id)
     urls = {}
     for view in VIEWS:
-        client.set_experiment_tag(exp_id, SHARED_VIEW_TAG + view.key, json.dumps(_state(view, client, exp_id)))
-        urls[f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&{ML_WORKFLOW}"] = view
+        state = _state(view, client, exp_id, parent)
+        client.set_experiment_tag(exp_id, SHARED_VIEW_TAG + view.key, json.dumps(state))
+        urls[f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&{ML_WORKFLOW}"] = (view, state)
     return exp_id, urls
 
 
@@ -109,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     exp_id = next(iter(urls)).split("/")[2] if urls else "?"
     print(f"MLflow views in {mlflow_runs.tracking_uri()}:")
     print(f"  the experiment's runs\n    {args.ui.rstrip('/')}/#/experiments/{exp_id}?{ML_WORKFLOW}")
-    for frag, view in urls.items():
+    for frag, (view, _) in urls.items():
         print(f"  {view.title}\n    {args.ui.rstrip('/')}/{frag}")
     return 0
 

@@ -329,9 +329,12 @@ def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
     client = mlflow.MlflowClient(uri)
     tags = client.get_experiment(exp_id).tags
     assert len(urls) == len(mlflow_views.VIEWS)
-    for frag, view in urls.items():
+    parent = mlflow_views.latest_pipeline_run(client, exp_id)
+    assert parent
+    for frag, (view, state) in urls.items():
         assert frag == (f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&workflowType=machine_learning")
-        state = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + view.key])
+        assert state == json.loads(tags[mlflow_views.SHARED_VIEW_TAG + view.key])
+        assert view.stage == "report" or f"tags.`mlflow.parentRunId` = '{parent}'" in state["searchFilter"]
         runs = client.search_runs([exp_id], state["searchFilter"], max_results=500)
         assert runs, view.key
         for col in state["selectedColumns"]:
@@ -340,6 +343,9 @@ def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
             have = [name in (r.data.params if kind == "params" else r.data.metrics) for r in runs]
             assert all(have) if view.key == "lfdt-table1" else any(have), f"{view.key}: runs lack {col}"
     table1 = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-table1"])
-    assert len(client.search_runs([exp_id], table1["searchFilter"], max_results=500)) >= len(METHODS) * len(SEEDS)
+    # exactly the evaluation runs behind the newest Table I, not those of earlier runs of the pipeline
+    shown = client.search_runs([exp_id], table1["searchFilter"], max_results=500)
+    assert sorted(r.info.run_name for r in shown) == sorted(
+        f"{m}-d3-s{s} evaluate" for m in METHODS for s in SEEDS)
     pipelines = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-pipelines"])
     assert {f"metrics.`{m}_d3_success_rate`" for m in METHODS} <= set(pipelines["selectedColumns"])

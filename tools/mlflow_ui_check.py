@@ -93,8 +93,9 @@ def main() -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         checks = {f"#/experiments/{exp_id}?{mlflow_views.ML_WORKFLOW}": ("the experiment's runs table",
                                                                       ["Runs", "matching runs", "pipeline "])}
-        for frag, view in urls.items():
-            runs = client.search_runs([exp_id], view.search_filter(), max_results=1)
+        for frag, (view, state) in urls.items():
+            # the run the view lists first
+            runs = client.search_runs([exp_id], state["searchFilter"], max_results=1, order_by=[view.search_order()])
             want = [k.split("`")[1] for k in view.columns] + [r.info.run_name for r in runs]
             if not runs:
                 problems.append(f"{view.key}: no {view.stage} runs in {store}")
