@@ -1,5 +1,5 @@
 """Named views of the MLflow runs table: Table I's evaluation runs side by side, the translators with their
-diagnostics, the BC runs, the pipeline parent runs.
+diagnostics, the BC runs, the pipeline parent runs, the real-robot tasks.
 
 MLflow keeps the columns a user picks in the browser only; a *shared view* (an experiment tag
 ``mlflow.sharedViewState.<key>``, opened with ``?viewStateShareKey=<key>``) travels with the tracking store instead.
@@ -50,15 +50,18 @@ class View:
     ascending: bool = True
     extra_filter: str = ""
     """More of MLflow's search syntax, joined with AND."""
+    parent_stage: str | None = "report"
+    """Only the children of this stage's newest run (the parent run of one run of the pipeline or of the twin);
+    None: every run of ``stage``."""
     metric_suffix: str = field(default="", compare=False)
     """If set, every metric of the shown runs whose name ends so is added as a column (the parent run's
     ``<method>_d<demos>_success_rate``, which depend on ``grid``)."""
 
     def search_filter(self, parent: str | None = None) -> str:
-        """MLflow's search filter of the view; with ``parent``, only that pipeline run's children (the runs behind
+        """MLflow's search filter of the view; with ``parent``, only that parent run's children (the runs behind
         the current Table I, not those of earlier runs of the pipeline)."""
         parts = [f"tags.`lfdt.stage` = '{self.stage}'"] + ([self.extra_filter] if self.extra_filter else [])
-        if parent and self.stage != "report":
+        if parent and self.parent_stage:
             parts.append(f"tags.`mlflow.parentRunId` = '{parent}'")
         return " AND ".join(parts)
 
@@ -80,7 +83,11 @@ VIEWS = [
          [*IDS, *(metric(f"{pi}/{m}") for pi in ("pi", "pi_r1", "pi_r2")
                   for m in ("best_val_loss", "best_iteration"))]),
     View("lfdt-pipelines", "pipeline runs: Table I's rates per run of the pipeline", "report", [],
-         order_by="attributes.start_time", ascending=False, metric_suffix="_success_rate"),
+         order_by="attributes.start_time", ascending=False, parent_stage=None, metric_suffix="_success_rate"),
+    View("lfdt-twin", "the real-robot tasks (twin or robots): both methods' success per task", "twin_evaluate",
+         [param("twin.backend"), param("twin.seeds"), param("twin.trials"),
+          *(metric(f"{m}/{k}") for m in ("lfdt", "bc_no_translation") for k in ("success_rate", "successes"))],
+         order_by="attributes.run_name", parent_stage="twin_report"),
 ]
 """The views written into the tracking store, in the order they are printed."""
 
@@ -95,25 +102,26 @@ def _state(view: View, client, experiment_id: str, parent: str | None) -> dict:
             "searchFilter": view.search_filter(parent)}
 
 
-def latest_pipeline_run(client, experiment_id: str) -> str | None:
-    """Id of the newest pipeline parent run (the report stage's), or None before the first."""
-    runs = client.search_runs([experiment_id], "tags.`lfdt.stage` = 'report'", max_results=1,
+def latest_run(client, experiment_id: str, stage: str = "report") -> str | None:
+    """Id of the newest run of a stage (``report``: the pipeline's parent run; ``twin_report``: the twin's), or None
+    before the first."""
+    runs = client.search_runs([experiment_id], f"tags.`lfdt.stage` = '{stage}'", max_results=1,
                               order_by=["attributes.start_time DESC"])
     return runs[0].info.run_id if runs else None
 
 
 def install(experiment: str | None = None) -> tuple[str, dict[str, tuple[View, dict]]]:
     """Write every view into the current tracking store's experiment, each showing the runs behind the newest
-    pipeline run; returns the experiment id and, by URL fragment
+    pipeline (or twin) run; returns the experiment id and, by URL fragment
     (``#/experiments/<id>/runs?viewStateShareKey=<key>&workflowType=machine_learning``), each view and its state."""
     import mlflow
 
     exp_id = mlflow_runs.experiment_id(experiment)
     client = mlflow.MlflowClient()
-    parent = latest_pipeline_run(client, exp_id)
+    parents = {st: latest_run(client, exp_id, st) for st in {v.parent_stage for v in VIEWS if v.parent_stage}}
     urls = {}
     for view in VIEWS:
-        state = _state(view, client, exp_id, parent)
+        state = _state(view, client, exp_id, parents.get(view.parent_stage))
         client.set_experiment_tag(exp_id, SHARED_VIEW_TAG + view.key, json.dumps(state))
         urls[f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&{ML_WORKFLOW}"] = (view, state)
     return exp_id, urls

@@ -69,6 +69,8 @@ def run() -> None:
         parent.artifact(png)
         parent.artifact(curves_png)
         adopted = mlflow_runs.adopt_children(parent.run_id, children)
+        # a reused run moves on to the newest parent run (MLflow keeps one parent per run); this list stays
+        parent.dict({"runs": list(dict.fromkeys(children))}, "children.json")
         parent_id = parent.run_id
     mlflow_views.install()  # the UI's views of these runs (README: MLflow), after the parent run they show
     stage.write_report(reports / "table1.json", {**headline, "mlflow_parent_run_id": parent_id,

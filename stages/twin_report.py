@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfdt import methods, mlflow_runs, stage, twin
+from lfdt import methods, mlflow_runs, mlflow_views, stage, twin
 from lfdt.evaluation import seed_state_interval, wilson_interval
 
 
@@ -63,6 +63,8 @@ def run() -> None:
         parent.artifact(Path("reports/twin.md"))
         parent.artifact(Path("reports/twin_runs.csv"))
         mlflow_runs.adopt_children(parent.run_id, children)
+        parent.dict({"runs": list(dict.fromkeys(children))}, "children.json")  # kept when a newer parent adopts them
+    mlflow_views.install()  # the twin's view shows this parent's runs (the report stage may have run before it)
     print("\n".join(lines))
 
 

@@ -329,12 +329,12 @@ def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
     client = mlflow.MlflowClient(uri)
     tags = client.get_experiment(exp_id).tags
     assert len(urls) == len(mlflow_views.VIEWS)
-    parent = mlflow_views.latest_pipeline_run(client, exp_id)
-    assert parent
     for frag, (view, state) in urls.items():
         assert frag == (f"#/experiments/{exp_id}/runs?viewStateShareKey={view.key}&workflowType=machine_learning")
         assert state == json.loads(tags[mlflow_views.SHARED_VIEW_TAG + view.key])
-        assert view.stage == "report" or f"tags.`mlflow.parentRunId` = '{parent}'" in state["searchFilter"]
+        if view.parent_stage:
+            parent = mlflow_views.latest_run(client, exp_id, view.parent_stage)
+            assert f"tags.`mlflow.parentRunId` = '{parent}'" in state["searchFilter"]
         runs = client.search_runs([exp_id], state["searchFilter"], max_results=500)
         assert runs, view.key
         for col in state["selectedColumns"]:
@@ -347,5 +347,10 @@ def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
     shown = client.search_runs([exp_id], table1["searchFilter"], max_results=500)
     assert sorted(r.info.run_name for r in shown) == sorted(
         f"{m}-d3-s{s} evaluate" for m in METHODS for s in SEEDS)
+    # each parent run keeps the list of the runs it was built from, also after a later one adopts them
+    parent = mlflow_views.latest_run(client, exp_id, "report")
+    kept = mlflow.artifacts.load_dict(f"runs:/{parent}/children.json")["runs"]
+    assert len(kept) == json.loads((dst / "runs/table1.json").read_text())["mlflow_child_runs"]
+    assert {r.info.run_id for r in shown} <= set(kept)
     pipelines = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-pipelines"])
     assert {f"metrics.`{m}_d3_success_rate`" for m in METHODS} <= set(pipelines["selectedColumns"])
