@@ -131,8 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ui", default="http://127.0.0.1:5000", help="where the MLflow UI is (for the printed URLs)")
     args = ap.parse_args(argv)
-    _, urls = install()
-    exp_id = next(iter(urls)).split("/")[2] if urls else "?"
+    exp_id, urls = install()
     print(f"MLflow views in {mlflow_runs.tracking_uri()}:")
     print(f"  the experiment's runs\n    {args.ui.rstrip('/')}/#/experiments/{exp_id}?{ML_WORKFLOW}")
     for frag, (view, _) in urls.items():

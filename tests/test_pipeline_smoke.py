@@ -314,7 +314,7 @@ def test_temp_experiment_logs_to_the_workspace_store(project):
     assert not list((dst / ".dvc/tmp/exps").glob("**/mlflow.db"))
 
 
-def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
+def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch, capsys):
     """Each shared view of lfdt.mlflow_views finds runs of the pipeline, and every column it shows is a param or
     metric some of those runs log (a renamed metric would leave an empty column in the UI); Table I's runs log all of
     them."""
@@ -352,5 +352,9 @@ def test_mlflow_views_show_columns_the_runs_have(project, monkeypatch):
     kept = mlflow.artifacts.load_dict(f"runs:/{parent}/children.json")["runs"]
     assert len(kept) == json.loads((dst / "runs/table1.json").read_text())["mlflow_child_runs"]
     assert {r.info.run_id for r in shown} <= set(kept)
+    # what `make mlflow-ui` prints: every view's URL on the given UI
+    assert mlflow_views.main(["--ui", "http://ui.example:5000/"]) == 0
+    printed = capsys.readouterr().out
+    assert all(f"http://ui.example:5000/{frag}" in printed for frag in urls)
     pipelines = json.loads(tags[mlflow_views.SHARED_VIEW_TAG + "lfdt-pipelines"])
     assert {f"metrics.`{m}_d3_success_rate`" for m in METHODS} <= set(pipelines["selectedColumns"])
