@@ -162,6 +162,12 @@ CURVE_PANELS = {"loss/dyn": "L_dyn (training batch)", "heldout/selection_loss": 
 """The translator's learning-curve columns plotted by :func:`plot_translator_curves`, with their titles."""
 
 
+def _curve_config(f: Path) -> tuple[str, int]:
+    """(method, demos) of a ``<method>-d<demos>_curve.csv`` file."""
+    method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
+    return method, int(demos)
+
+
 def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
     """Translator learning curves from reports/translator/*_curve.csv: one panel per CURVE_PANELS column, one
     colour per method, one line style per demo count, each the mean over seeds."""
@@ -172,8 +178,8 @@ def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
 
     curves = []
     for f in Path(translator_dir).glob("*_curve.csv"):
-        method, demos = f.name[: -len("_curve.csv")].rsplit("-d", 1)
-        curves.append((METHOD_ORDER.index(method), int(demos), method, f))
+        method, demos = _curve_config(f)
+        curves.append((METHOD_ORDER.index(method), demos, method, f))
     if not curves:
         raise FileNotFoundError(f"no translator learning curves (*_curve.csv) in {translator_dir}")
     styles = ["-", "--", ":", "-."]
@@ -227,7 +233,7 @@ def curves_by_method(curve_dir: Path, column: str, x: str = "iteration") -> pd.D
     ones). A DVC plot of it overlays the methods."""
     per_method: dict[str, list[pd.Series]] = {}
     for f in sorted(Path(curve_dir).glob("*_curve.csv")):
-        method = f.name[: -len("_curve.csv")].rsplit("-d", 1)[0]
+        method, _ = _curve_config(f)
         curve = pd.read_csv(f)
         if column not in curve:
             raise ValueError(f"{f} has no column {column!r}")

@@ -40,18 +40,18 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _chromium(url: str, *args: str) -> str:
+def _chromium(chromium: str, url: str, *args: str) -> str:
     with tempfile.TemporaryDirectory() as profile:
-        out = subprocess.run([CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", *args, url],
+        out = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", *args, url],
                              capture_output=True, text=True, timeout=180)
     if out.returncode != 0:
         raise SystemExit(f"error: chromium failed on {url}: {out.stderr[-1000:]}")
     return out.stdout
 
 
-def _text(url: str) -> str:
+def _text(chromium: str, url: str) -> str:
     """The rendered page's visible text (tags stripped)."""
-    return html.unescape(re.sub(r"<[^>]+>", " ", _chromium(url, "--dump-dom")))
+    return html.unescape(re.sub(r"<[^>]+>", " ", _chromium(chromium, url, "--dump-dom")))
 
 
 def main() -> int:
@@ -59,9 +59,8 @@ def main() -> int:
     ap.add_argument("--store", default=None, help="tracking store URI (default: the workspace's mlflow.db)")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "mlflow-ui", help="folder for the screenshots")
     args = ap.parse_args()
-    global CHROMIUM
-    CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-    if CHROMIUM is None:
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
         print("error: no chromium on PATH (Debian: apt-get install chromium)", file=sys.stderr)
         return 2
     store = args.store or mlflow_runs.tracking_uri()
@@ -91,21 +90,21 @@ def main() -> int:
 
         client = mlflow.MlflowClient(ui)
         args.out.mkdir(parents=True, exist_ok=True)
-        checks = {f"#/experiments/{exp_id}?{mlflow_views.ML_WORKFLOW}": ("the experiment's runs table",
-                                                                      ["Runs", "matching runs", "pipeline "])}
+        # name: (URL fragment, what it shows, texts it must show)
+        checks = {"experiment": (f"#/experiments/{exp_id}?{mlflow_views.ML_WORKFLOW}", "the experiment's runs table",
+                                 ["Runs", "matching runs", "pipeline "])}
         for frag, (view, state) in urls.items():
             # the run the view lists first
             runs = client.search_runs([exp_id], state["searchFilter"], max_results=1, order_by=[view.search_order()])
             want = [k.split("`")[1] for k in view.columns] + [r.info.run_name for r in runs]
             if not runs:
                 problems.append(f"{view.key}: no {view.stage} runs in {store}")
-            checks[frag] = (view.title, want)
-        for frag, (title, want) in checks.items():
+            checks[view.key] = (frag, view.title, want)
+        for name, (frag, title, want) in checks.items():
             url = f"{ui}/{frag}"
-            text = _text(url)
+            text = _text(chromium, url)
             missing = [w for w in want if w not in text]
-            name = frag.split("viewStateShareKey=")[1].split("&")[0] if "viewStateShareKey=" in frag else "experiment"
-            _chromium(url, f"--screenshot={args.out / (name + '.png')}")
+            _chromium(chromium, url, f"--screenshot={args.out / (name + '.png')}")
             status = "ok" if not missing else f"MISSING {missing}"
             print(f"{name:18s} {status:10s} {title}")
             if missing:
