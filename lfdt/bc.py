@@ -50,7 +50,8 @@ class BCMember(nn.Module):
         perturbs the normalised inputs (training only)."""
         z = self.norm(s)
         if input_noise > 0:
-            z = z + input_noise * torch.randn(z.shape, generator=generator)
+            # drawn on the CPU, so a seed gives the same noise on every device
+            z = z + input_noise * torch.randn(z.shape, generator=generator).to(z.device)
         return ((self.net(z) - self.act_norm(a)) ** 2).mean()
 
 
@@ -87,9 +88,10 @@ def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) 
     return np.isin(episodes, val_eps)
 
 
-def train_member(task: BCTask, cfg: BCConfig, seed: int,
-                 log: Callable[[dict, int], None] | None = None, progress=None) -> tuple[BCMember, dict]:
-    """Fit one member; keep the parameters of the lowest validation loss."""
+def train_member(task: BCTask, cfg: BCConfig, seed: int, log: Callable[[dict, int], None] | None = None,
+                 progress=None, device: str | torch.device = "cpu") -> tuple[BCMember, dict]:
+    """Fit one member on ``device``; keep the parameters of the lowest validation loss. The member comes back on
+    the CPU."""
     torch.manual_seed(seed)
     torch.set_num_threads(cfg.torch_threads)
     rng = np.random.default_rng(seed)
@@ -101,15 +103,17 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
     member.norm.load_state_dict(Normalizer.fit(s[~val], 1e-2).state_dict())
     # actions can be torques in [-1, 1] or displacements of a few millimetres: both are learnt at unit scale
     member.act_norm.load_state_dict(Normalizer.fit(a[~val], 1e-4).state_dict())
-    s_t, a_t = torch.from_numpy(s), torch.from_numpy(a)
+    member.to(device)
+    s_t, a_t = torch.from_numpy(s).to(device), torch.from_numpy(a).to(device)
+    # indices are drawn on the CPU (one generator for every device) and moved with the batch
     tr_idx = torch.from_numpy(np.flatnonzero(~val))
-    va_idx = torch.from_numpy(np.flatnonzero(val))
+    va_idx = torch.from_numpy(np.flatnonzero(val)).to(device)
     opt = torch.optim.Adam(member.parameters(), lr=cfg.learning_rate)
     best, best_state, best_it = float("inf"), None, 0
     curve, running = [], 0.0
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
-        idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)]
+        idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)].to(device)
         loss = member.loss(s_t[idx], a_t[idx], cfg.input_noise, gen)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -120,7 +124,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
         if it % cfg.eval_every == 0 or it == cfg.iterations:
             n = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
             with torch.no_grad():
-                sel = va_idx if len(va_idx) else tr_idx
+                sel = va_idx if len(va_idx) else tr_idx.to(device)
                 v = float(member.loss(s_t[sel], a_t[sel]))
             point = {f"{task.name}/train_loss": running / n, f"{task.name}/val_loss": v}
             running = 0.0
@@ -132,7 +136,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int,
                 log(point, it)
     member.load_state_dict(best_state)
     wall = time.perf_counter() - t0
-    return member.eval(), {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
+    return member.cpu().eval(), {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
                            "val_samples": int(val.sum()), "wall_time_s": wall,
                            "iterations_per_s": cfg.iterations / wall, "curve": curve}
 

@@ -508,6 +508,8 @@ class TwinParams(Strict):
 class Params(Strict):
     """The whole params.yaml."""
 
+    device: Annotated[str, Field(pattern=r"^(cpu|cuda(:[0-9]+)?|mps)$")] = "cpu"
+    """Torch device of the training stages (experts, dynamics, translator, BC, twin): cpu, cuda, cuda:N or mps."""
     env: EnvConfig = EnvConfig()
     """The simulated task."""
     experts: ExpertsConfig = ExpertsConfig()

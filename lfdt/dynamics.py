@@ -82,9 +82,10 @@ def split_episodes(episode: np.ndarray, val_fraction: float, seed: int) -> tuple
 
 
 def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], None] | None = None,
-                 progress=None) -> tuple[DynamicsModels, dict]:
-    """Fit F and F^-1 (L2 losses, eqs. 3-4) on the training episodes; each keeps its parameters of lowest
-    held-out error (checked every ``eval_every`` iterations); report held-out errors and ratios."""
+                 progress=None, device: str | torch.device = "cpu") -> tuple[DynamicsModels, dict]:
+    """Fit F and F^-1 (L2 losses, eqs. 3-4) on ``device`` on the training episodes; each keeps its parameters of
+    lowest held-out error (checked every ``eval_every`` iterations); report held-out errors and ratios. The models
+    come back on the CPU."""
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
     train, val = split_episodes(d.episode, cfg.val_fraction, cfg.seed)
@@ -96,13 +97,15 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
         y2_n = models.y_norm(torch.from_numpy(d.y2))
         delta = (y2_n - y_n)[torch.from_numpy(train)]
         models.delta_scale.copy_(torch.clamp(delta.std(dim=0), min=cfg.std_floor))
-    a = torch.from_numpy(d.a)
+    models.to(device)
+    y_n, y2_n, a = y_n.to(device), y2_n.to(device), torch.from_numpy(d.a).to(device)
+    # minibatch indices are drawn on the CPU (one generator for every device) and moved with the batch
     tr_idx = torch.from_numpy(np.flatnonzero(train))
-    va_idx = torch.from_numpy(np.flatnonzero(val))
+    va_idx = torch.from_numpy(np.flatnonzero(val)).to(device)
     opt_f = torch.optim.Adam(models.f.parameters(), lr=cfg.learning_rate)
     opt_g = torch.optim.Adam(models.g.parameters(), lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(cfg.seed)
-    a_mean = a[tr_idx].mean(dim=0)
+    a_mean = a[tr_idx.to(device)].mean(dim=0)
 
     def held_out() -> dict:
         with torch.no_grad():
@@ -130,7 +133,7 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     # keep each model at its lowest held-out error (small data sets, e.g. the twin's 3300 samples, overfit)
     best = {"f": (float("inf"), None, 0), "g": (float("inf"), None, 0)}
     for it in range(1, cfg.iterations + 1):
-        idx = tr_idx[batches(len(tr_idx), cfg.batch_size, gen)]
+        idx = tr_idx[batches(len(tr_idx), cfg.batch_size, gen)].to(device)
         yb, y2b, ab = y_n[idx], y2_n[idx], a[idx]
         # in units of one-step change, so the rarely moving box weighs as much as the arms
         loss_f = (((models.forward_model(yb, ab) - y2b) / models.delta_scale) ** 2).mean()
@@ -163,6 +166,7 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     models.f.load_state_dict(best["f"][1])
     models.g.load_state_dict(best["g"][1])
     result = held_out()
+    models.cpu()
     result.update({"forward_best_iteration": best["f"][2], "inverse_best_iteration": best["g"][2],
                    "train_transitions": int(train.sum()), "val_transitions": int(val.sum()),
                    "wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve})

@@ -4,3 +4,7 @@ each names the file, key or argument at fault."""
 
 class StageError(Exception):
     """Base of the errors whose message says all a user needs."""
+
+
+class DeviceError(StageError):
+    """params.yaml names a torch device this machine does not have."""

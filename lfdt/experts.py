@@ -76,13 +76,13 @@ def make_vec_env(pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig, n_env
     return venv
 
 
-def build_sac(env, cfg: ExpertsConfig, buffer_size: int | None = None) -> SAC:
-    """An SAC agent with the configured networks and optimiser settings."""
+def build_sac(env, cfg: ExpertsConfig, buffer_size: int | None = None, device: str | torch.device = "cpu") -> SAC:
+    """An SAC agent with the configured networks and optimiser settings, its networks on ``device``."""
     return SAC(
         "MlpPolicy", env, learning_rate=cfg.learning_rate, buffer_size=buffer_size or cfg.buffer_size,
         learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma, train_freq=1,
         gradient_steps=cfg.gradient_steps, policy_kwargs={"net_arch": list(cfg.net_arch)}, seed=cfg.seed,
-        device="cpu", verbose=0)
+        device=device, verbose=0)
 
 
 # ----------------------------------------------------------------------------- checkpoints
@@ -137,7 +137,7 @@ class Checkpoints:
     def load(self, model: SAC, path: Path) -> list[dict]:
         """Restore parameters, optimiser states, entropy coefficient, counters and replay buffer; returns the
         learning curve up to the checkpoint."""
-        ckpt = torch.load(path / "params.pt", weights_only=True)
+        ckpt = torch.load(path / "params.pt", weights_only=True, map_location="cpu")
         model.set_parameters(ckpt["params"], exact_match=True)
         with torch.no_grad():
             model.log_ent_coef.copy_(ckpt["log_ent_coef"])
@@ -218,12 +218,14 @@ class TrainingCallback(BaseCallback):
 
 
 def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg: DemosConfig, checkpoint_dir: Path,
-                 log: Callable[[dict, int], None] | None = None, progress=None) -> tuple[SAC, dict]:
-    """Train (or resume training) the SAC expert of a pairing. Returns the model and timing stats."""
+                 log: Callable[[dict, int], None] | None = None, progress=None,
+                 device: str | torch.device = "cpu") -> tuple[SAC, dict]:
+    """Train (or resume training) the SAC expert of a pairing, its networks on ``device`` (the environments step
+    on the CPU). Returns the model and timing stats."""
     torch.set_num_threads(cfg.torch_threads)
     seed_everything(cfg.seed)
     venv = make_vec_env(pairing, env_cfg, demos_cfg, cfg.n_envs, cfg.seed)
-    model = build_sac(venv, cfg)
+    model = build_sac(venv, cfg, device=device)
     checkpoints = Checkpoints(checkpoint_dir, config_hash(pairing, env_cfg, cfg, demos_cfg))
     resumed_from, curve = 0, []
     latest = checkpoints.latest()
@@ -261,7 +263,10 @@ def save_expert(model: SAC, out_dir: Path, pairing: str, env_cfg: EnvConfig, cfg
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = out_dir / ".policy.pt.tmp"
-    torch.save(model.policy.state_dict(), tmp)
+    state = model.policy.state_dict()
+    if model.device.type != "cpu":  # a machine without the training device loads it too
+        state = {k: v.cpu() for k, v in state.items()}
+    torch.save(state, tmp)
     os.replace(tmp, out_dir / "policy.pt")
     human_only = demos_cfg.protocol == "programmed_robot"
     config = {
@@ -291,7 +296,7 @@ def load_expert(model_dir: Path) -> tuple[SAC, dict]:
     cfg = ExpertsConfig.model_validate(config["experts"])
     env = make_env(config["pairing"], env_cfg, expert_demos_config(config))
     model = build_sac(env, cfg, buffer_size=1)
-    model.policy.load_state_dict(torch.load(model_dir / "policy.pt", weights_only=True))
+    model.policy.load_state_dict(torch.load(model_dir / "policy.pt", weights_only=True, map_location="cpu"))
     model.policy.set_training_mode(False)
     return model, config
 

@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from lfdt.errors import StageError
+from lfdt.errors import DeviceError, StageError
 
 
 def mlp(in_dim: int, out_dim: int, hidden: list[int], slope: float = 0.2) -> nn.Sequential:
@@ -65,7 +65,7 @@ def save_state(module: nn.Module, path: str | Path, config: dict) -> None:
 
 def load_state(module: nn.Module, path: str | Path) -> nn.Module:
     """Load a state dict saved by :func:`save_state` (``weights_only=True``) into module; eval mode."""
-    module.load_state_dict(torch.load(path, weights_only=True))
+    module.load_state_dict(torch.load(path, weights_only=True, map_location="cpu"))
     return module.eval()
 
 
@@ -89,3 +89,20 @@ def check_finite(value: float, what: str, iteration: int) -> float:
         raise TrainingDiverged(f"{what} is {value} at iteration {iteration}: training diverged (lower its "
                                f"learning_rate, or look for NaN or infinite values in its input data)")
     return value
+
+
+def torch_device(name: str) -> torch.device:
+    """The torch device ``params.yaml``'s ``device`` names, checked to exist here (a clear error, not a CUDA
+    traceback after the data has loaded)."""
+    dev = torch.device(name)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise DeviceError(f"params.yaml: device = {name!r}, but torch {torch.__version__} finds no CUDA device on "
+                              "this machine (torch.cuda.is_available() is False); set device: cpu")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise DeviceError(f"params.yaml: device = {name!r}, but this machine has {torch.cuda.device_count()} "
+                              "CUDA device(s), numbered from 0")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise DeviceError(f"params.yaml: device = {name!r}, but torch finds no MPS device on this machine; "
+                          "set device: cpu")
+    return dev

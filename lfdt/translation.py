@@ -332,26 +332,28 @@ def _gan_losses(kind: str):
 class _Sampler:
     """Draws the index sets of one batch from per-pairing tensors."""
 
-    def __init__(self, sets: dict[str, Transitions], translator: Translator, gen: torch.Generator):
-        self.gen = gen
+    def __init__(self, sets: dict[str, Transitions], translator: Translator, gen: torch.Generator,
+                 device: str | torch.device = "cpu"):
+        self.gen, self.device = gen, device
         self.x, self.x2, self.x0, self.n = {}, {}, {}, {}
         for p, tr in sets.items():
             norm = translator.x_norms[p]
             with torch.no_grad():
-                self.x[p] = norm(torch.as_tensor(tr.x))
-                self.x2[p] = norm(torch.as_tensor(tr.x2))
-                self.x0[p] = self.x[p] if tr.x_prev is None else norm(torch.as_tensor(tr.x_prev))
+                self.x[p] = norm(torch.as_tensor(tr.x, device=device))
+                self.x2[p] = norm(torch.as_tensor(tr.x2, device=device))
+                self.x0[p] = self.x[p] if tr.x_prev is None else norm(torch.as_tensor(tr.x_prev, device=device))
             self.n[p] = len(tr.x)
 
     def sample(self, per_pairing: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """(x_prev, x, x2, pairing index) of ``per_pairing`` random transitions of each pairing."""
         x0s, xs, x2s, ps = [], [], [], []
         for p in layout.PAIRINGS:
-            idx = torch.randint(0, self.n[p], (per_pairing,), generator=self.gen)
+            # drawn on the CPU, so a seed draws the same batches on every device
+            idx = torch.randint(0, self.n[p], (per_pairing,), generator=self.gen).to(self.device)
             x0s.append(self.x0[p][idx])
             xs.append(self.x[p][idx])
             x2s.append(self.x2[p][idx])
-            ps.append(torch.full((per_pairing,), PAIRING_INDEX[p], dtype=torch.long))
+            ps.append(torch.full((per_pairing,), PAIRING_INDEX[p], dtype=torch.long, device=self.device))
         return torch.cat(x0s), torch.cat(xs), torch.cat(x2s), torch.cat(ps)
 
 
@@ -361,15 +363,16 @@ class _Losses:
     def __init__(self, tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig, tl: TaskLayout):
         self.tr, self.dyn, self.cfg = tr, dyn, cfg
         y_dim = len(tl.state_columns("Y"))
-        self.robot_mask = torch.zeros(len(layout.PAIRINGS), y_dim, dtype=torch.bool)
+        dev = dyn.delta_scale.device
+        self.robot_mask = torch.zeros(len(layout.PAIRINGS), y_dim, dtype=torch.bool, device=dev)
         for p, i in PAIRING_INDEX.items():
             self.robot_mask[i, tl.robot_y_slice(p)] = True
         self.n_robot = len(tl.arm_cols["r1"])
         self.dyn_scale = dyn.delta_scale if cfg.dyn_scale == "delta" else torch.ones_like(dyn.delta_scale)
         obj = [tl.state_columns("Y").index(c) for c in tl.object_cols]
-        self.object_mask = torch.zeros(y_dim, dtype=torch.bool)
+        self.object_mask = torch.zeros(y_dim, dtype=torch.bool, device=dev)
         self.object_mask[obj] = True
-        self.dyn_weight = torch.ones(y_dim)
+        self.dyn_weight = torch.ones(y_dim, device=dev)
         self.dyn_weight[obj] = cfg.dyn_object_weight
 
     def __call__(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pidx: torch.Tensor
@@ -402,16 +405,16 @@ class _Losses:
         return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"] + self.cfg.lambda_hand * out["hand"]
 
 
-def _normalised(tr: Translator, sets: dict[str, Transitions]
+def _normalised(tr: Translator, sets: dict[str, Transitions], device: str | torch.device = "cpu"
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """All transitions of some pairings, normalised: (x_prev, x, x2, pairing index)."""
+    """All transitions of some pairings, normalised, on ``device``: (x_prev, x, x2, pairing index)."""
     x0s, xs, x2s, ps = [], [], [], []
     with torch.no_grad():
         for p, t in sets.items():
-            x0s.append(tr.x_norms[p](torch.as_tensor(t.x if t.x_prev is None else t.x_prev)))
-            xs.append(tr.x_norms[p](torch.as_tensor(t.x)))
-            x2s.append(tr.x_norms[p](torch.as_tensor(t.x2)))
-            ps.append(torch.full((len(t.x),), PAIRING_INDEX[p], dtype=torch.long))
+            x0s.append(tr.x_norms[p](torch.as_tensor(t.x if t.x_prev is None else t.x_prev, device=device)))
+            xs.append(tr.x_norms[p](torch.as_tensor(t.x, device=device)))
+            x2s.append(tr.x_norms[p](torch.as_tensor(t.x2, device=device)))
+            ps.append(torch.full((len(t.x),), PAIRING_INDEX[p], dtype=torch.long, device=device))
     return torch.cat(x0s), torch.cat(xs), torch.cat(x2s), torch.cat(ps)
 
 
@@ -419,8 +422,10 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
                      dyn: DynamicsModels, cfg: TranslatorConfig, seed: int, std_floor: float = 1e-2,
                      log: Callable[[dict, int], None] | None = None, progress=None,
                      tl: TaskLayout = BOX_PUSH, kinematics: Kinematics | None = None,
-                     held_out: dict[str, Transitions] | None = None) -> tuple[Translator, dict]:
-    """Train G and D with eq. 6 (frozen F, F^-1). Returns the translator and training statistics.
+                     held_out: dict[str, Transitions] | None = None, device: str | torch.device = "cpu"
+                     ) -> tuple[Translator, dict]:
+    """Train G and D with eq. 6 (frozen F, F^-1) on ``device``. Returns the translator (on the CPU, as ``dyn``
+    is left) and training statistics.
 
     ``held_out``: demonstrations G never trains on; every ``cfg.select_every`` iterations the translation loss on
     them is measured and G keeps the parameters of its lowest value (without them, the last iterate is kept).
@@ -438,16 +443,30 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl)
-    demo_s, rand_s = _Sampler(demos, tr, gen), _Sampler(random_x, tr, gen)
+    try:
+        tr.to(device)
+        dyn.to(device)
+        return _train_translator(tr, dyn, demos, random_x, y_random, cfg, gen, log, progress, tl, held_out, device)
+    finally:
+        tr.cpu()
+        dyn.cpu()
+
+
+def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Transitions],
+                      random_x: dict[str, Transitions], y_random: np.ndarray, cfg: TranslatorConfig,
+                      gen: torch.Generator, log: Callable[[dict, int], None] | None, progress, tl: TaskLayout,
+                      held_out: dict[str, Transitions] | None, device: str | torch.device) -> tuple[Translator, dict]:
+    """The training loop of :func:`train_translator`, with ``tr`` and ``dyn`` on ``device``."""
+    demo_s, rand_s = _Sampler(demos, tr, gen, device), _Sampler(random_x, tr, gen, device)
     with torch.no_grad():
-        y_real_all = dyn.y_norm(torch.as_tensor(y_random))
+        y_real_all = dyn.y_norm(torch.as_tensor(y_random, device=device))
     opt_g = torch.optim.Adam(tr.G.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     opt_d = torch.optim.Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
     losses = _Losses(tr, dyn, cfg, tl)
     quarter = max(1, cfg.batch_size // 4)
-    hold = _normalised(tr, held_out) if held_out else None
-    pool = torch.empty(0, len(tl.state_columns("Y")))
+    hold = _normalised(tr, held_out, device) if held_out else None
+    pool = torch.empty(0, len(tl.state_columns("Y")), device=device)
     best = (float("inf"), None, 0)
     sums: dict[str, float] = {}
     curve = []
@@ -463,14 +482,14 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
         if cfg.history_size:
             if len(pool):
                 n_old = len(fake) // 2
-                old = pool[torch.randint(0, len(pool), (n_old,), generator=gen)]
+                old = pool[torch.randint(0, len(pool), (n_old,), generator=gen).to(device)]
                 fake_d = torch.cat([fake[: len(fake) - n_old], old])
             else:
                 fake_d = fake
             pool = torch.cat([pool, fake])[-cfg.history_size:]
         else:
             fake_d = fake
-        y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_hat),), generator=gen)]
+        y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_hat),), generator=gen).to(device)]
         d_both = tr.D(torch.cat([y_real, fake_d]))
         d_real, d_fake = d_both[:len(y_real)], d_both[len(y_real):]
         l_d = d_loss_fn(d_real, d_fake)

@@ -4,19 +4,21 @@ import argparse
 from pathlib import Path
 
 from lfdt import dynamics, layout, mlflow_runs, stage
-from lfdt.nets import save_state
+from lfdt.nets import save_state, torch_device
 
 
 def run() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
-    cfg = stage.params(args.params).dynamics
+    p = stage.params(args.params)
+    cfg, device = p.dynamics, torch_device(p.device)
     d = dynamics.load_random_y("data/random/Y.parquet")
-    with mlflow_runs.stage_run("fit_dynamics", {"dynamics": cfg.model_dump()}, tags={"domain": "Y", "seed": cfg.seed},
-                            run_name="fit_dynamics") as run:
+    with mlflow_runs.stage_run("fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
+                               tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as run:
         with stage.progress(cfg.iterations, "F and F^-1", "it") as bar:
-            models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: run.metrics(m, i), progress=bar)
+            models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: run.metrics(m, i), progress=bar,
+                                                device=device)
         curve = res.pop("curve")
         save_state(models, Path("models/dynamics/dynamics.pt"), {
             "dynamics": cfg.model_dump(), "state_columns": layout.state_columns("Y"),

@@ -5,10 +5,12 @@ from pathlib import Path
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
 from lfdt.jobs.bc import bc_job
+from lfdt.nets import torch_device
 
 
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.METHODS)
+    torch_device(p.device)  # before any job starts
     cfgs = common.configs(method, demos, p.grid.seeds, params_path)
     members = 2 if methods.get(method).data == "raw" else 1
     results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),

@@ -4,6 +4,7 @@ import argparse
 
 from lfdt import layout, parallel, stage
 from lfdt.jobs.experts import expert_job
+from lfdt.nets import torch_device
 
 
 def run() -> None:
@@ -11,6 +12,7 @@ def run() -> None:
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = stage.params(args.params)
+    torch_device(p.device)  # before any job starts
     results = parallel.run_jobs(expert_job, [(pr, args.params) for pr in layout.PAIRINGS], p.grid.workers,
                                 total=p.experts.total_timesteps * len(layout.PAIRINGS), desc="SAC experts",
                                 unit="step")

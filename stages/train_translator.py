@@ -6,10 +6,12 @@ from pathlib import Path
 from lfdt import methods, parallel, stage, translation
 from lfdt.jobs import common
 from lfdt.jobs.translator import translator_job
+from lfdt.nets import torch_device
 
 
 def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.translator_methods())
+    torch_device(p.device)  # before any job starts
     cfgs = common.configs(method, demos, p.grid.seeds, params_path)
     iters = translation.method_config(method, p.translator).iterations
     results = parallel.run_jobs(translator_job, cfgs, p.grid.workers, total=iters * len(cfgs),

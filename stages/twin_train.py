@@ -3,19 +3,22 @@
 from pathlib import Path
 
 from lfdt import mlflow_runs, stage, tasks
+from lfdt.nets import torch_device
 from lfdt.twin import pipeline as twin_pipeline
 
 
 def run() -> None:
     task, all_params = stage.task_arguments(__doc__, tasks.NAMES)
-    p = all_params.twin
-    params = {"twin": {k: v for k, v in p.model_dump().items() if k in ("seeds", "dynamics", "translator", "bc")}}
+    p, device = all_params.twin, torch_device(all_params.device)
+    params = {"twin": {k: v for k, v in p.model_dump().items() if k in ("seeds", "dynamics", "translator", "bc")},
+              "device": all_params.device}
     per_seed = {}
     for seed in p.seeds:
         with mlflow_runs.stage_run("twin_train", params, tags={"task": task, "seed": seed},
                                    run_name=f"{task}-s{seed} twin_train") as run:
-            res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", log=lambda m, i, r=run:
-                                      r.metrics({f"translator/{k}": v for k, v in m.items()}, i))
+            res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", device=device,
+                                      log=lambda m, i, r=run: r.metrics({f"translator/{k}": v for k, v in m.items()},
+                                                                        i))
             run.metrics({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()
                          if isinstance(vv, int | float) and not isinstance(vv, bool)})
             per_seed[str(seed)] = {**res, "mlflow_run_id": run.run_id}

@@ -8,6 +8,7 @@ import torch
 
 from lfdt import bc, data, layout, methods, mlflow_runs, stage
 from lfdt.jobs.common import BC_DATA, DATA_FILE, POLICIES, Config, numeric
+from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 
 
@@ -27,12 +28,13 @@ def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
     p = stage.params(cfg.params)
     bcfg = p.bc
     torch.set_num_threads(bcfg.torch_threads)
+    device = torch_device(p.device)
     tasks = bc_tasks(cfg)
-    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
+    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags(), "device": p.device}, tags=cfg.tags(),
                             run_name=f"{cfg.name} train_bc") as run:
         members, metrics, curves = [], {}, []
         for task in tasks:
-            member, st = bc.train_member(task, bcfg, cfg.seed, log=run.metrics, progress=progress)
+            member, st = bc.train_member(task, bcfg, cfg.seed, log=run.metrics, progress=progress, device=device)
             members.append(member)
             for c in st.pop("curve"):
                 curves.append({"seed": cfg.seed, "member": task.name,

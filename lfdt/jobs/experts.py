@@ -7,6 +7,7 @@ from pathlib import Path
 
 from lfdt import experts, mlflow_runs, stage
 from lfdt.jobs.common import numeric
+from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 
 EXPERTS = Path("models/experts")
@@ -22,12 +23,13 @@ def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
     p = stage.params(params_path)
     cfg, env_cfg, demos_cfg = p.experts, p.env, p.demos
     out = EXPERTS / pairing
+    device = torch_device(p.device)
     with mlflow_runs.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
-                                              **experts.protocol_doc(demos_cfg)},
+                                              **experts.protocol_doc(demos_cfg), "device": p.device},
                             tags={"pairing": pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
                             run_name=f"{pairing} train_experts") as run:
         model, stats = experts.train_expert(pairing, env_cfg, cfg, demos_cfg, EXPERT_CHECKPOINTS / pairing,
-                                            log=run.metrics, progress=progress)
+                                            log=run.metrics, progress=progress, device=device)
         ev = experts.evaluate_expert(model, pairing, env_cfg, demos_cfg, cfg.eval_episodes, cfg.seed)
         curve = stats.pop("curve")
         summary = {"pairing": pairing, "protocol": demos_cfg.protocol, **ev, **stats,

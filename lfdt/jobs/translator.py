@@ -9,7 +9,7 @@ import torch
 from lfdt import data, layout, mlflow_runs, stage, translation
 from lfdt.dynamics import load_models, load_random_y
 from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TRANSLATORS, Config, numeric
-from lfdt.nets import save_state
+from lfdt.nets import save_state, torch_device
 from lfdt.parallel import Progress
 
 
@@ -19,6 +19,7 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     p = stage.params(cfg.params)
     tcfg = translation.method_config(cfg.method, p.translator)
     torch.set_num_threads(tcfg.torch_threads)
+    device = torch_device(p.device)
     kin = translation.Kinematics.of_box_push(p.env)
     dyn = load_models(DYNAMICS)
     demo_paths = {pr: DEMOS / f"{pr}.parquet" for pr in layout.PAIRINGS}
@@ -30,11 +31,11 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr, kind="random")
                 for pr in layout.PAIRINGS}
     y_random = load_random_y(RANDOM / "Y.parquet").y
-    with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags()}, tags=cfg.tags(),
-                            run_name=f"{cfg.name} train_translator") as run:
+    with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device},
+                               tags=cfg.tags(), run_name=f"{cfg.name} train_translator") as run:
         tr, stats = translation.train_translator(demos, random_x, y_random, dyn, tcfg, seed=cfg.seed,
                                                  std_floor=p.dynamics.std_floor, log=run.metrics,
-                                                 progress=progress, kinematics=kin, held_out=held)
+                                                 progress=progress, kinematics=kin, held_out=held, device=device)
         save_state(tr, cfg.dir(TRANSLATORS) / "translator.pt", {
             **cfg.tags(), "translator": tcfg.model_dump(),
             "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},

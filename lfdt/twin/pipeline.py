@@ -150,15 +150,15 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path = "data/t
 
 
 def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str | Path = "data/twin",
-          log: Callable[[dict, int], None] | None = None) -> dict:
+          log: Callable[[dict, int], None] | None = None, device: str | torch.device = "cpu") -> dict:
     """Fit F, F^-1, the translator, BC on the translation (lfdt) and BC on the raw demonstrations, all with one
-    seed, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
+    seed on ``device``, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
     tl = tasks.get(task).layout
     rec = recordings(task, seed, root)
     models_dir = Path(models_dir)
     ry = load_random_y(rec["random_Y"], tl)
     dcfg = p.dynamics.model_copy(update={"seed": seed})
-    dyn, dres = fit_dynamics(ry, dcfg)
+    dyn, dres = fit_dynamics(ry, dcfg, device=device)
     save_state(dyn, models_dir / "dynamics.pt", {"dynamics": dcfg.model_dump(), "task": task,
                                                  "state_columns": ry.state_columns})
     demo_paths = {pr: str(rec[f"demos_{pr}"]) for pr in layout.PAIRINGS}
@@ -172,7 +172,8 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     cfg = translation.method_config("lfdt", p.translator)
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
     tr, tstats = translation.train_translator(train_demos, random_x, ry.y, dyn, cfg, seed=seed,
-                                              std_floor=p.dynamics.std_floor, log=log, tl=tl, held_out=held)
+                                              std_floor=p.dynamics.std_floor, log=log, tl=tl, held_out=held,
+                                              device=device)
     save_state(tr, models_dir / "translator.pt", {"translator": cfg.model_dump(), "task": task, "seed": seed})
     dt = TwinConfig().control_dt
     translated = translation.translate_demos(tr, dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
@@ -184,7 +185,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         members = []
         for t in members_data:
-            m, st = bc.train_member(t, p.bc, seed)
+            m, st = bc.train_member(t, p.bc, seed, device=device)
             members.append(m)
             out[f"bc/{method}/{t.name}"] = {k: v for k, v in st.items() if k != "curve"}
         bc.BCPolicy(members, tl, action_bounds=None).save(models_dir / method, {
