@@ -21,8 +21,10 @@ setup: $(STAMP)  ## create .venv and install the pinned dependencies
 reproduce: setup  ## run the whole pipeline with params.yaml
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/dvc repro
 
-test: setup  ## unit tests and a smoke run of the whole DAG on tiny params
-	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q; rc=$$?; \
+# Two pytest workers, one per core of the project's machine; the tests sharing the smoke project's DAG run (one
+# xdist_group) on one worker, so it is built once.
+test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers)
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc
 
 smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a temporary copy (most of `make test`)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from lfdt import mlflow_runs
 
@@ -53,7 +53,7 @@ class View:
     parent_stage: str | None = "report"
     """Only the children of this stage's newest run (the parent run of one run of the pipeline or of the twin);
     None: every run of ``stage``."""
-    metric_suffix: str = field(default="", compare=False)
+    metric_suffix: str = ""
     """If set, every metric of the shown runs whose name ends so is added as a column (the parent run's
     ``<method>_d<demos>_success_rate``, which depend on ``grid``)."""
 

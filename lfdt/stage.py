@@ -57,7 +57,7 @@ def runs_path(metrics_path: str | Path) -> Path:
     parts = path.parts
     if REPORTS.name not in parts[:-1]:
         raise StageError(f"{path}: a metrics file must lie under {REPORTS}/ (its bookkeeping goes to {RUNS}/)")
-    i = len(parts) - 1 - parts[:-1][::-1].index(REPORTS.name) - 1
+    i = max(k for k, part in enumerate(parts[:-1]) if part == REPORTS.name)  # the last, as in reports/x/reports/
     return Path(*parts[:i], RUNS.name, *parts[i + 1:])
 
 
@@ -106,6 +106,13 @@ def read_report(path: str | Path) -> dict:
         except json.JSONDecodeError as err:
             raise StageError(f"{f} is not valid JSON ({err})") from None
     return _merge(*parts)
+
+
+def run_ids(bookkeeping: Mapping[str, Any]) -> list[str]:
+    """The MLflow run ids a stage's bookkeeping (a ``runs/`` file) names: the stage's own, then each seed's."""
+    ids = [bookkeeping.get("mlflow_run_id")]
+    ids += [s.get("mlflow_run_id") for s in bookkeeping.get("seeds", {}).values()]
+    return [i for i in ids if i]
 
 
 def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:

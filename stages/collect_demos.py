@@ -31,7 +31,7 @@ def run() -> None:
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
         stage.write_report(Path("reports/demos") / f"{args.pairing}.json",
-                         {"pairing": args.pairing, **stats, "mlflow_run_id": run.run_id})
+                           {"pairing": args.pairing, **stats, "mlflow_run_id": run.run_id})
     print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "
           f"mean length {stats['mean_demo_length']:.1f} steps")
 

@@ -25,7 +25,7 @@ def run() -> None:
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
         stage.write_report(Path("reports/random") / f"{args.domain}.json",
-                         {"domain": args.domain, **stats, "mlflow_run_id": run.run_id})
+                           {"domain": args.domain, **stats, "mlflow_run_id": run.run_id})
     print(f"{args.domain}: {stats['transitions']} transitions in {stats['wall_s']:.1f} s "
           f"({stats['transitions_per_s']:.0f}/s)")
 

@@ -7,8 +7,8 @@ import json
 from lfdt import mlflow_runs, mlflow_views, report, stage
 
 # bookkeeping files (runs/) of the runs behind Table I: one run each, or one per seed
-SINGLE_RUNS = ("experts/*_train.json", "random/*.json", "demos/*.json", "dynamics.json")
-SEEDED_RUNS = ("translator/*.json", "track/*.json", "bc/*.json", "eval/*.json")
+RUN_FILES = ("experts/*_train.json", "random/*.json", "demos/*.json", "dynamics.json",
+             "translator/*.json", "track/*.json", "bc/*.json", "eval/*.json")
 
 
 def run() -> None:
@@ -50,13 +50,8 @@ def run() -> None:
     stage.write_csv(reports / "stage_times.csv", times.to_dict("records"))
     headline = report.headline(table)
     # one parent run per pipeline run: it carries the table and plot, and adopts the runs behind them
-    children = []
-    for pattern in SINGLE_RUNS:
-        children += [json.loads(f.read_text()).get("mlflow_run_id") for f in sorted(runs.glob(pattern))]
-    for pattern in SEEDED_RUNS:
-        for f in sorted(runs.glob(pattern)):
-            children += [s.get("mlflow_run_id") for s in json.loads(f.read_text()).get("seeds", {}).values()]
-    children = [c for c in children if c]
+    children = [i for pattern in RUN_FILES for f in sorted(runs.glob(pattern))
+                for i in stage.run_ids(json.loads(f.read_text()))]
     total_wall = float(times.total_s.sum())
     with mlflow_runs.stage_run("report", {"grid": p.grid.model_dump()}, tags={"pipeline_parent": "true"},
                                run_name=mlflow_runs.pipeline_run_name("pipeline")) as parent:

@@ -17,8 +17,8 @@ def run() -> None:
                 if isinstance(vv, int | float)}
         run.metrics(flat)
         stage.write_report(Path("reports/twin") / f"{task}_data.json",
-                         {"task": task, "backend": p.backend, **stats, "stage_wall_s": stage.wall_since_start(),
-                          "mlflow_run_id": run.run_id})
+                           {"task": task, "backend": p.backend, **stats, "stage_wall_s": stage.wall_since_start(),
+                            "mlflow_run_id": run.run_id})
     for s, per in stats.items():
         print(f"{task} {s}: " + ", ".join(f"{k} {v['transitions']}" for k, v in per.items()))
 

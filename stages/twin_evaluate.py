@@ -37,8 +37,8 @@ def run() -> None:
         run.metrics({f"{m}/successes": v for m, v in summary.items()})
         run.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
         stage.write_report(Path("reports/twin") / f"{task}_eval.json",
-                         {"task": task, "backend": p.backend, "trials": counts, "successes": summary,
-                          "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
+                           {"task": task, "backend": p.backend, "trials": counts, "successes": summary,
+                            "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
     print(f"{task}: " + ", ".join(f"{m} {v}/{counts[m]}" for m, v in summary.items()))
 
 

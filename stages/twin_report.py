@@ -51,12 +51,8 @@ def run() -> None:
     stage.write_csv("reports/twin_runs.csv", rows)
     Path("reports/twin.md").write_text("\n".join(lines) + "\n")
     # one parent run for the twin: it carries the report and adopts the runs behind it
-    children = []
-    for task in p.tasks:
-        for kind in ("data", "train", "eval"):
-            rep = stage.read_report(f"reports/twin/{task}_{kind}.json")
-            children += [rep["mlflow_run_id"]] if "mlflow_run_id" in rep else []
-            children += [s["mlflow_run_id"] for s in rep.get("seeds", {}).values() if "mlflow_run_id" in s]
+    children = [i for task in p.tasks for kind in ("data", "train", "eval")
+                for i in stage.run_ids(stage.read_report(f"reports/twin/{task}_{kind}.json"))]
     params = {"twin": {"seeds": p.seeds, "trials": p.trials, "backend": p.backend}}
     with mlflow_runs.stage_run("twin_report", params, tags={"pipeline_parent": "true"},
                                run_name=mlflow_runs.pipeline_run_name("twin")) as parent:

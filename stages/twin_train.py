@@ -25,7 +25,7 @@ def run() -> None:
         print(f"{task} seed {seed}: dynamics F ratio {res['dynamics']['forward_ratio']:.3f}, "
               f"F^-1 ratio {res['dynamics']['inverse_ratio']:.3f}")
     stage.write_report(Path("reports/twin") / f"{task}_train.json",
-                     {"task": task, "seeds": per_seed, "stage_wall_s": stage.wall_since_start()})
+                       {"task": task, "seeds": per_seed, "stage_wall_s": stage.wall_since_start()})
 
 
 if __name__ == "__main__":

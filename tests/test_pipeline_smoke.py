@@ -19,6 +19,10 @@ import yaml
 
 from lfdt import data, layout, methods, stage
 
+# with `pytest -n` (make test) these tests and the other module sharing the smoke_project fixture run on one worker,
+# so the smoke project's DAG is built once
+pytestmark = pytest.mark.xdist_group("smoke_project")
+
 _dvc = smoke.dvc
 
 

@@ -56,6 +56,8 @@ def test_a_report_is_split_into_measured_results_and_bookkeeping(tmp_path):
     assert books == {"stage_wall_s": 12.5, "seeds": {"3": {"mlflow_run_id": "abc", "job_wall_s": 3.0,
                                                               "iterations_per_s": 9.0}}}
     assert stage.read_report(metrics) == report
+    assert stage.run_ids(books) == ["abc"]
+    assert stage.run_ids({"mlflow_run_id": "p", "seeds": {"3": {"mlflow_run_id": "s3"}, "4": {}}}) == ["p", "s3"]
     # the same results from a second run (other ids and times): the metrics file is byte-identical
     before = metrics.read_bytes()
     stage.write_report(metrics, {**report, "stage_wall_s": 99.0})
@@ -74,3 +76,11 @@ def test_a_report_outside_reports_or_without_its_bookkeeping_is_refused(tmp_path
     metrics.write_text("{}")
     with pytest.raises(StageError, match=r"runs/x\.json is missing"):
         stage.read_report(metrics)
+
+
+def test_the_bookkeeping_of_a_report_lies_under_the_last_reports_folder():
+    from pathlib import Path
+
+    assert stage.runs_path("reports/bc/lfdt-d50.json") == Path("runs/bc/lfdt-d50.json")
+    assert stage.runs_path("/tmp/reports/x/reports/y.json") == Path("/tmp/reports/x/runs/y.json")
+    assert stage.runs_path("reports/reports.json") == Path("runs/reports.json")

@@ -26,6 +26,10 @@ from lfdt.sweep import points
 from lfdt.sweep.chain import RAN, safe_name
 from lfdt.sweep.plan import make_plan
 
+# with `pytest -n` (make test) these tests and the other module sharing the smoke_project fixture run on one worker,
+# so the smoke project's DAG is built once
+pytestmark = pytest.mark.xdist_group("smoke_project")
+
 BUCKET = "lfdt-sweep"
 
 
