@@ -136,9 +136,10 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int, log: Callable[[dict, in
                 log(point, it)
     member.load_state_dict(best_state)
     wall = time.perf_counter() - t0
-    return member.cpu().eval(), {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
-                           "val_samples": int(val.sum()), "wall_time_s": wall,
-                           "iterations_per_s": cfg.iterations / wall, "curve": curve}
+    stats = {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
+             "val_samples": int(val.sum()), "wall_time_s": wall, "iterations_per_s": cfg.iterations / wall,
+             "curve": curve}
+    return member.cpu().eval(), stats
 
 
 class BCPolicy:

@@ -30,8 +30,8 @@ def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
     torch.set_num_threads(bcfg.torch_threads)
     device = torch_device(p.device)
     tasks = bc_tasks(cfg)
-    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags(), "device": p.device}, tags=cfg.tags(),
-                            run_name=f"{cfg.name} train_bc") as run:
+    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags(), "device": p.device},
+                               tags=cfg.tags(), run_name=f"{cfg.name} train_bc") as run:
         members, metrics, curves = [], {}, []
         for task in tasks:
             member, st = bc.train_member(task, bcfg, cfg.seed, log=run.metrics, progress=progress, device=device)
