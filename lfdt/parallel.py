@@ -10,6 +10,7 @@ fails stops the stage with the job named; with ``workers=1`` the jobs run one af
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import queue
 import sys
 import threading
@@ -48,7 +49,28 @@ class _QueueProgress:
             self.pending = 0
 
 
-def _call(fn: Callable[[Any, Progress], Any], job: Any, progress: _QueueProgress) -> Any:
+_PROGRESS_QUEUE = None
+"""In a worker: the queue its jobs' progress goes to (set by :func:`_init_worker`)."""
+
+
+def _init_worker(parent: int, q) -> None:
+    """Worker initializer: keep the progress queue (a pool's workers can get a queue only by inheritance), and end
+    this worker as soon as the stage process that started it is gone. A pool's workers get no signal when their
+    parent is killed, and would otherwise train on as orphans, writing the stage's checkpoints and outputs under a
+    rerun of the same stage."""
+    global _PROGRESS_QUEUE
+    _PROGRESS_QUEUE = q
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(3)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+
+
+def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
+    progress = _QueueProgress(_PROGRESS_QUEUE)
     try:
         return fn(job, progress)
     finally:
@@ -68,36 +90,36 @@ def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: i
         if workers <= 1 or len(jobs) <= 1:
             return [fn(job, bar) for job in jobs]
         ctx = mp.get_context("spawn")
-        with ctx.Manager() as manager:
-            q = manager.Queue()
-            done = threading.Event()
+        q = ctx.Queue()
+        done = threading.Event()
 
-            def pump() -> None:
-                while not done.is_set():
-                    try:
-                        bar.update(q.get(timeout=0.2))
-                    except queue.Empty:
-                        continue
+        def pump() -> None:
+            while not done.is_set():
+                try:
+                    bar.update(q.get(timeout=0.2))
+                except queue.Empty:
+                    continue
 
-            reader = threading.Thread(target=pump, daemon=True)
-            reader.start()
-            try:
-                with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
-                    futures = [pool.submit(_call, fn, job, _QueueProgress(q)) for job in jobs]
-                    finished, _ = wait(futures, return_when=FIRST_EXCEPTION)
-                    for i, f in enumerate(futures):
-                        if f.done() and f.exception() is not None:
-                            for other in futures:
-                                other.cancel()
-                            raise RuntimeError(f"job {jobs[i]!r} failed: {f.exception()}") from f.exception()
-                    return [f.result() for f in futures]
-            finally:
-                done.set()
-                reader.join()
-                while True:  # what the workers reported after the reader stopped
-                    try:
-                        bar.update(q.get_nowait())
-                    except queue.Empty:
-                        break
+        reader = threading.Thread(target=pump, daemon=True)
+        reader.start()
+        try:
+            with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx,
+                                     initializer=_init_worker, initargs=(os.getpid(), q)) as pool:
+                futures = [pool.submit(_call, fn, job) for job in jobs]
+                wait(futures, return_when=FIRST_EXCEPTION)
+                for i, f in enumerate(futures):
+                    if f.done() and f.exception() is not None:
+                        for other in futures:
+                            other.cancel()
+                        raise RuntimeError(f"job {jobs[i]!r} failed: {f.exception()}") from f.exception()
+                return [f.result() for f in futures]
+        finally:
+            done.set()
+            reader.join()
+            while True:  # what the workers reported after the reader stopped
+                try:
+                    bar.update(q.get(timeout=0.05))
+                except queue.Empty:
+                    break
     finally:
         bar.close()

@@ -1,0 +1,87 @@
+"""Jobs side by side in worker processes: results in job order, and no worker outlives a killed stage."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from lfdt import parallel
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def square(job: int, progress) -> int:
+    progress.update(1)
+    return job * job
+
+
+def fail_on_two(job: int, progress) -> int:
+    if job == 2:
+        raise ValueError("two is bad")
+    return job
+
+
+def test_results_come_back_in_job_order():
+    assert parallel.run_jobs(square, [3, 1, 2], workers=2, total=3) == [9, 1, 4]
+    assert parallel.run_jobs(square, [3, 1, 2], workers=1, total=3) == [9, 1, 4]
+
+
+def test_a_failing_job_stops_the_stage_named():
+    import pytest
+
+    with pytest.raises(RuntimeError, match="job 2 failed: two is bad"):
+        parallel.run_jobs(fail_on_two, [1, 2, 3], workers=2)
+
+
+STAGE = """
+import sys, time
+sys.path.insert(0, {tests!r})
+from lfdt import parallel
+import test_parallel
+parallel.run_jobs(test_parallel.sleep_and_write, [({out!r}, 0), ({out!r}, 1)], workers=2)
+"""
+
+
+def sleep_and_write(job: tuple[str, int], progress) -> None:
+    """A job that says it started (its pid), then would write its output 60 s later."""
+    out, i = job
+    Path(out, f"pid{i}").write_text(str(os.getpid()))
+    time.sleep(60)
+    Path(out, f"done{i}").write_text("written by an orphan")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie (exited, not yet reaped by init) counts as gone
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.exists() and stat.read_text().split(")")[-1].split()[0] != "Z"
+
+
+def test_workers_end_when_the_stage_process_is_killed(tmp_path):
+    stage = subprocess.Popen([sys.executable, "-c", STAGE.format(tests=str(ROOT / "tests"), out=str(tmp_path))],
+                             cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.glob("pid*"))) < 2:
+            assert stage.poll() is None and time.monotonic() < deadline, "the jobs did not start"
+            time.sleep(0.1)
+        pids = [int(p.read_text()) for p in tmp_path.glob("pid*")]
+        stage.send_signal(signal.SIGKILL)  # as a machine's OOM killer or `kill -9` would
+        stage.wait(10)
+        deadline = time.monotonic() + 10
+        while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(p) for p in pids), "a worker outlived its stage"
+        assert not list(tmp_path.glob("done*"))
+    finally:
+        stage.kill()
+        for p in tmp_path.glob("pid*"):
+            try:
+                os.kill(int(p.read_text()), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
