@@ -34,7 +34,10 @@ def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
         curve = stats.pop("curve")
         summary = {"pairing": pairing, "protocol": demos_cfg.protocol, **ev, **stats,
                    "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
-        experts.save_expert(model, out, pairing, env_cfg, cfg, demos_cfg, {"evaluation": ev, "training": stats})
+        # the resolved config beside the model holds no wall times or speeds, so an identical rerun writes the same
+        # model folder and what is downstream of it does not rerun (those go to runs/experts/)
+        measured = {k: v for k, v in stats.items() if not stage.is_bookkeeping(k)}
+        experts.save_expert(model, out, pairing, env_cfg, cfg, demos_cfg, {"evaluation": ev, "training": measured})
         stage.write_report(EXPERT_REPORTS / f"{pairing}_train.json", summary)
         stage.write_csv(EXPERT_REPORTS / f"{pairing}_curve.csv",
                         [{"timesteps": c["timesteps"], "success_rate": c["train/success_rate_last100"],
