@@ -34,6 +34,7 @@ import pyarrow as pa
 import torch
 from stable_baselines3 import SAC
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -78,11 +79,15 @@ def make_vec_env(pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig, n_env
 
 def build_sac(env, cfg: ExpertsConfig, buffer_size: int | None = None, device: str | torch.device = "cpu") -> SAC:
     """An SAC agent with the configured networks and optimiser settings, its networks on ``device``."""
-    return SAC(
+    model = SAC(
         "MlpPolicy", env, learning_rate=cfg.learning_rate, buffer_size=buffer_size or cfg.buffer_size,
         learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma, train_freq=1,
         gradient_steps=cfg.gradient_steps, policy_kwargs={"net_arch": list(cfg.net_arch)}, seed=cfg.seed,
         device=device, verbose=0)
+    # Our callback keeps the curve; without a logger of its own, SB3 makes an empty SB3-<date> folder in /tmp on
+    # every learn().
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 # ----------------------------------------------------------------------------- checkpoints

@@ -503,8 +503,8 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         opt_g.step()
-        check_finite(float(loss), "the translator's G loss", it)
-        check_finite(float(l_d), "the translator's D loss", it)
+        check_finite(float(loss.detach()), "the translator's G loss", it)
+        check_finite(float(l_d.detach()), "the translator's D loss", it)
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
         for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", out["dyn"]), ("loss/id", out["id"]),
@@ -578,7 +578,7 @@ def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorC
                 m = pidx == PAIRING_INDEX[p]
                 a_hat = torch.clamp(h["a_tilde"][m], -1.0, 1.0)
                 sl = slice(0, n_a) if layout.robot_arm(p) == "r1" else slice(n_a, 2 * n_a)
-                errs.append(((a_hat[:, sl] - torch.as_tensor(t.a)) ** 2).mean(dim=1))
+                errs.append(((a_hat[:, sl] - torch.tensor(t.a)) ** 2).mean(dim=1))
             out["labels/real_robot_rmse"] = float(torch.cat(errs).mean().sqrt())
         if kinematics is not None:
             y_raw = dyn.y_norm.inverse(h["y_hat"])

@@ -113,3 +113,16 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
         assert report["timesteps"] == 3_000
         assert (tmp_path / f"models/experts/{pairing}/policy.pt").exists()
         assert not (tmp_path / f"checkpoints/experts/{pairing}").exists()  # cleaned up once the model is safe
+
+
+def test_training_leaves_no_logger_folder_in_the_temp_dir(tmp_path, monkeypatch):
+    """SB3 makes an SB3-<date> folder in the temp dir on every learn() unless the model has a logger of its own."""
+    import tempfile
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    tiny = TINY.model_copy(update={"total_timesteps": 300, "checkpoint_every": 300, "log_every": 300})
+    experts.train_expert("R1H", EnvConfig(), tiny, DemosConfig(), tmp_path / "ckpt")
+    assert sorted(p.name for p in tmp.glob("SB3-*")) == []

@@ -41,8 +41,8 @@ def tiny(tmp_path_factory):
         paths[d] = data.write_table(table, root / f"{d}.parquet")
     dyn = DynamicsModels(19, 6, [32, 32])
     y = data.read_transitions(paths["Y"])
-    dyn.y_norm.mean.copy_(torch.as_tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].mean().to_numpy()))
-    dyn.y_norm.std.copy_(torch.as_tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].std().to_numpy()))
+    dyn.y_norm.mean.copy_(torch.tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].mean().to_numpy()))
+    dyn.y_norm.std.copy_(torch.tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].std().to_numpy()))
     return env, paths, dyn
 
 
@@ -152,7 +152,7 @@ def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     full = translation._Losses(tr, dyn, TranslatorConfig(), layout.BOX_PUSH)(x0, x, x2, pidx)
     none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), layout.BOX_PUSH)(x0, x, x2, pidx)
     obj = full["dyn_sq"][:, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[1]
-    assert float(none["dyn"]) == pytest.approx(float(full["dyn"] - obj), rel=1e-4)
+    assert float(none["dyn"].detach()) == pytest.approx(float((full["dyn"] - obj).detach()), rel=1e-4)
 
 
 def test_forward_kinematics_needs_a_robot_model(tiny):
@@ -161,3 +161,22 @@ def test_forward_kinematics_needs_a_robot_model(tiny):
     with pytest.raises(ValueError, match="needs the arms' kinematics"):
         translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
                                      TranslatorConfig(iterations=2), seed=0)
+
+
+def test_training_and_diagnostics_raise_no_warnings(tiny):
+    """A translator stage's log shows no torch warnings (a detached loss, a copied label array)."""
+    import warnings
+
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", with_actions=True)
+                for p in layout.PAIRINGS}
+    kin = translation.Kinematics.of_box_push(env)
+    cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16)
+    # a writable copy, as load_random_y gives the stage
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in layout.state_columns("Y")]].to_numpy(np.float32).copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        tr, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin)
+        with torch.no_grad():
+            diag = translation.translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin)
+    assert np.isfinite(diag["labels/real_robot_rmse"])
