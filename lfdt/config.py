@@ -395,6 +395,9 @@ class TranslatorConfig(Strict):
     """Units of L_dyn: normalised one-step changes ('delta') or normalised states ('state')."""
     labels: Literal["inverse", "recorded_robot"] = "inverse"
     """BC action labels: F^-1(y_hat_t, y_hat_t+1) for both arms, or keep the recorded action of the real robot."""
+    restarts: PosInt = 1
+    """Translators trained on the same demonstrations from other initialisations (seeds seed + 1000 r); the
+    translation is the mean of their normalised outputs (1 = the paper's single translator; README, step 28)."""
     holdout_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.1
     """Fraction of each pairing's demonstrations (whole episodes) G never trains on; G keeps its parameters of the
     lowest translation loss on them (0 = keep the last iterate)."""

@@ -452,6 +452,41 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
         dyn.cpu()
 
 
+RESTART_SEED_STRIDE = 1000
+"""Restart r of a translator of seed s trains with seed s + RESTART_SEED_STRIDE * r (r = 0: the translator itself)."""
+
+
+class MeanTranslator:
+    """The mean translation of several translators of one configuration (restarts: same data, other initialisations);
+    it translates like a :class:`Translator`."""
+
+    def __init__(self, members: list[Translator]):
+        if not members:
+            raise ValueError("MeanTranslator needs at least one translator")
+        self.members = members
+
+    def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
+        """The mean of the members' normalised y_hat (one member: its own, unchanged)."""
+        if len(self.members) == 1:
+            return self.members[0].translate(x, pairing)
+        return torch.stack([m.translate(x, pairing) for m in self.members]).mean(dim=0)
+
+
+def train_restarts(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
+                   dyn: DynamicsModels, cfg: TranslatorConfig, seed: int,
+                   log: Callable[[dict, int], None] | None = None, **kwargs) -> tuple[list[Translator], list[dict]]:
+    """``cfg.restarts`` translators of one configuration (:func:`train_translator` with seeds seed + 1000 r).
+    Restart 0 logs under its own names, restart r > 0 under ``restart<r>/``."""
+    trs, stats = [], []
+    for r in range(cfg.restarts):
+        log_r = log if r == 0 or log is None else (
+            lambda m, i, r=r: log({f"restart{r}/{k}": v for k, v in m.items()}, i))
+        tr, st = train_translator(demos, random_x, y_random, dyn, cfg, seed + RESTART_SEED_STRIDE * r, log=log_r,
+                                  **kwargs)
+        trs.append(tr)
+        stats.append(st)
+    return trs, stats
+
 def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Transitions],
                       random_x: dict[str, Transitions], y_random: np.ndarray, cfg: TranslatorConfig,
                       gen: torch.Generator, log: Callable[[dict, int], None] | None, progress, tl: TaskLayout,
@@ -595,8 +630,8 @@ def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorC
     return out
 
 
-def translate_demos(tr: Translator, dyn: DynamicsModels, demos_path: dict[str, str], episodes: dict[str, list[int]],
-                    cfg: TranslatorConfig, dt: float, tl: TaskLayout = BOX_PUSH,
+def translate_demos(tr: Translator | MeanTranslator, dyn: DynamicsModels, demos_path: dict[str, str],
+                    episodes: dict[str, list[int]], cfg: TranslatorConfig, dt: float, tl: TaskLayout = BOX_PUSH,
                     action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> pd.DataFrame:
     """Translate every chosen demonstration of both pairings into Y states with BC action labels (raw units).
 

@@ -13,8 +13,8 @@ def run() -> None:
     method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.translator_methods())
     torch_device(p.device)  # before any job starts
     cfgs = common.configs(method, demos, p.grid.seeds, params_path)
-    iters = translation.method_config(method, p.translator).iterations
-    results = parallel.run_jobs(translator_job, cfgs, p.grid.workers, total=iters * len(cfgs),
+    tcfg = translation.method_config(method, p.translator)
+    results = parallel.run_jobs(translator_job, cfgs, p.grid.workers, total=tcfg.iterations * tcfg.restarts * len(cfgs),
                                 desc=f"translator {cfgs[0].group}")
     out = Path("reports/translator")
     stage.write_report(out / f"{cfgs[0].group}.json", stage.group_report(results))

@@ -180,3 +180,29 @@ def test_training_and_diagnostics_raise_no_warnings(tiny):
         with torch.no_grad():
             diag = translation.translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin)
     assert np.isfinite(diag["labels/real_robot_rmse"])
+
+
+def test_restarts_translate_with_the_mean_of_their_outputs(tiny):
+    """restarts = 1 is the single translator unchanged; restarts = 2 trains a second one from seed + 1000 and
+    translates with the mean of both normalised outputs; restart r logs under restart<r>/."""
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    y = np.zeros((10, 19), np.float32)
+    cfg = TranslatorConfig(iterations=30, hidden=[16], log_every=10, select_every=10, batch_size=16,
+                           kinematics="learned")
+    single, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3)
+    logged = []
+    trs, stats = translation.train_restarts(random_x, random_x, y, dyn, cfg.model_copy(update={"restarts": 2}), 3,
+                                            log=lambda m, i: logged.append(set(m)))
+    other, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3 + translation.RESTART_SEED_STRIDE)
+    x = random_x["R1H"].x[:12]
+    for a, b in zip(single.state_dict().values(), trs[0].state_dict().values()):
+        assert torch.equal(a, b)
+    for a, b in zip(other.state_dict().values(), trs[1].state_dict().values()):
+        assert torch.equal(a, b)
+    assert not torch.equal(trs[0].translate(x, "R1H"), trs[1].translate(x, "R1H"))
+    torch.testing.assert_close(translation.MeanTranslator(trs).translate(x, "R1H"),
+                               (single.translate(x, "R1H") + other.translate(x, "R1H")) / 2)
+    assert torch.equal(translation.MeanTranslator(trs[:1]).translate(x, "R1H"), single.translate(x, "R1H"))
+    assert len(stats) == 2 and any(all(k.startswith("restart1/") for k in m) for m in logged)
+    assert any(not any(k.startswith("restart") for k in m) for m in logged)

@@ -33,15 +33,18 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     y_random = load_random_y(RANDOM / "Y.parquet").y
     with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device},
                                tags=cfg.tags(), run_name=f"{cfg.name} train_translator") as run:
-        tr, stats = translation.train_translator(demos, random_x, y_random, dyn, tcfg, seed=cfg.seed,
-                                                 std_floor=p.dynamics.std_floor, log=run.metrics,
-                                                 progress=progress, kinematics=kin, held_out=held, device=device)
-        save_state(tr, cfg.dir(TRANSLATORS) / "translator.pt", {
-            **cfg.tags(), "translator": tcfg.model_dump(),
-            "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},
-            "y_columns": layout.state_columns("Y"), "episodes": episodes,
-            "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
-        df = translation.translate_demos(tr, dyn, demo_paths, episodes, tcfg, p.env.timestep * p.env.frame_skip)
+        trs, all_stats = translation.train_restarts(demos, random_x, y_random, dyn, tcfg, cfg.seed, log=run.metrics,
+                                                    std_floor=p.dynamics.std_floor, progress=progress,
+                                                    kinematics=kin, held_out=held, device=device)
+        for r, tr in enumerate(trs):
+            save_state(tr, cfg.dir(TRANSLATORS) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
+                **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
+                "init_seed": cfg.seed + translation.RESTART_SEED_STRIDE * r,
+                "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},
+                "y_columns": layout.state_columns("Y"), "episodes": episodes,
+                "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
+        df = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
+                                         p.env.timestep * p.env.frame_skip)
         table = translation.translated_table(df, {
             "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
             "source_episodes": episodes, "layout": layout.describe(),
@@ -50,12 +53,22 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
         data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["translated"])
         with torch.no_grad():
             replay = translation.replay_check(df, p.env)
-            diag = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random,
-                                                      kinematics=kin, seed=cfg.seed)
+            # G and D of each restart on their own; restart 0 under the plain names
+            diag = {}
+            for r, tr in enumerate(trs):
+                d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, kinematics=kin,
+                                                       seed=cfg.seed)
+                diag.update(d if r == 0 else {f"restart{r}/{k}": v for k, v in d.items()})
         diag.update(translation.translation_diagnostics(df, demo_paths, episodes))
+        stats = all_stats[0]
         curve = stats.pop("curve")
+        restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
+        for r, st in enumerate(all_stats[1:], 1):
+            st.pop("curve")
+            restarts.update({f"restart{r}/final/{k}": v for k, v in st.pop("final").items()})
+            restarts.update({f"restart{r}/{k}": v for k, v in st.items()})
         metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
-                   **stats, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
+                   **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
                    "mlflow_run_id": run.run_id}
         run.metrics(numeric(metrics))
     return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}

@@ -171,16 +171,19 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
                 for pr in layout.PAIRINGS}
     cfg = translation.method_config("lfdt", p.translator)
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
-    tr, tstats = translation.train_translator(train_demos, random_x, ry.y, dyn, cfg, seed=seed,
-                                              std_floor=p.dynamics.std_floor, log=log, tl=tl, held_out=held,
-                                              device=device)
-    save_state(tr, models_dir / "translator.pt", {"translator": cfg.model_dump(), "task": task, "seed": seed})
+    trs, all_stats = translation.train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
+                                                std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device)
+    for r, tr in enumerate(trs):
+        save_state(tr, models_dir / ("translator.pt" if r == 0 else f"translator_r{r}.pt"),
+                   {"translator": cfg.model_dump(), "task": task, "seed": seed, "restart": r})
+    tstats = all_stats[0]
     dt = TwinConfig().control_dt
-    translated = translation.translate_demos(tr, dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
+    translated = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, cfg, dt, tl,
+                                             action_bounds=None)
     diag = translation.translation_diagnostics(translated, demo_paths, episodes, tl)
     raw = {pr: data.read_transitions(path, kind="demos", domain=pr, task=task) for pr, path in demo_paths.items()}
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
-           "translator": {"wall_time_s": tstats["wall_time_s"], **tstats["final"], **diag}}
+           "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag}}
     for method in METHODS:
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         members = []
