@@ -16,9 +16,10 @@ def run() -> None:
     for seed in p.seeds:
         with mlflow_runs.stage_run("twin_train", params, tags={"task": task, "seed": seed},
                                    run_name=f"{task}-s{seed} twin_train") as run:
-            res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", device=device,
-                                      log=lambda m, i, r=run: r.metrics({f"translator/{k}": v for k, v in m.items()},
-                                                                        i))
+            def log(m: dict, i: int, r=run) -> None:
+                r.metrics({f"translator/{k}": v for k, v in m.items()}, i)
+
+            res = twin_pipeline.train(task, p, seed, Path("models/twin") / task / f"s{seed}", device=device, log=log)
             run.metrics({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()
                          if isinstance(vv, int | float) and not isinstance(vv, bool)})
             per_seed[str(seed)] = {**res, "mlflow_run_id": run.run_id}

@@ -26,8 +26,8 @@ def expert_job(job: tuple[str, str], progress: Progress | None = None) -> dict:
     device = torch_device(p.device)
     with mlflow_runs.stage_run("train_experts", {"env": env_cfg.model_dump(), "experts": cfg.model_dump(),
                                               **experts.protocol_doc(demos_cfg), "device": p.device},
-                            tags={"pairing": pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
-                            run_name=f"{pairing} train_experts") as run:
+                               tags={"pairing": pairing, "seed": cfg.seed, "protocol": demos_cfg.protocol},
+                               run_name=f"{pairing} train_experts") as run:
         model, stats = experts.train_expert(pairing, env_cfg, cfg, demos_cfg, EXPERT_CHECKPOINTS / pairing,
                                             log=run.metrics, progress=progress, device=device)
         ev = experts.evaluate_expert(model, pairing, env_cfg, demos_cfg, cfg.eval_episodes, cfg.seed)
