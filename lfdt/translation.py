@@ -167,13 +167,16 @@ class Translator(nn.Module):
     """G, D and the X normalisers of both pairings, saved as one state dict."""
 
     def __init__(self, hidden: list[int], tl: TaskLayout = BOX_PUSH, slope: float = 0.2,
-                 kinematics: Kinematics | None = None):
+                 kinematics: Kinematics | None = None, d_cols: list[int] | None = None):
         super().__init__()
         x_dim = len(tl.canonical_x_columns("R1H"))
         y_dim = len(tl.state_columns("Y"))
         self.x_norms = nn.ModuleDict({p: Normalizer(np.zeros(x_dim), np.ones(x_dim)) for p in layout.PAIRINGS})
         self.G = mlp(x_dim + len(layout.PAIRINGS), y_dim, hidden, slope)
-        self.D = mlp(y_dim, 1, hidden, slope)
+        # the columns of y D sees (disc_input): all, or the robots' only
+        d_cols = list(range(y_dim)) if d_cols is None else d_cols
+        self.register_buffer("d_idx", torch.as_tensor(d_cols, dtype=torch.long))
+        self.D = mlp(len(d_cols), 1, hidden, slope)
         # skip connections (see skip_pairs): y_n[j] += x_n[src[j]] * scale[j] + offset[j] where src[j] >= 0
         n_p = len(layout.PAIRINGS)
         self.register_buffer("skip_src", torch.full((n_p, y_dim), -1, dtype=torch.long))
@@ -250,6 +253,10 @@ class Translator(nn.Module):
             dq = ((q - q_prev) / self.fk_dt - self.y_mean[dqi]) / self.y_std[dqi]
             y_n[:, dqi.reshape(-1)] = dq.reshape(len(y_n), -1)
         return y_n
+
+    def disc(self, y: torch.Tensor) -> torch.Tensor:
+        """D's logit that ``y`` (normalised Y states) is real, from the columns D sees."""
+        return self.D(y.index_select(-1, self.d_idx))
 
     def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
         """Normalised y_hat for the raw canonical states of one episode of a pairing, in time order (no gradient).
@@ -439,7 +446,10 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
         prm.requires_grad_(False)
     if cfg.kinematics == "forward" and kinematics is None:
         raise ValueError("translator.kinematics = 'forward' needs the arms' kinematics; this task has none")
-    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None)
+    y_cols = tl.state_columns("Y")
+    d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
+    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
+                    d_cols=d_cols)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl)
@@ -454,6 +464,17 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
 
 RESTART_SEED_STRIDE = 1000
 """Restart r of a translator of seed s trains with seed s + RESTART_SEED_STRIDE * r (r = 0: the translator itself)."""
+
+
+def restart_seed(seed: int, r: int) -> int:
+    """The initialisation seed of restart ``r`` of a translator of seed ``seed``."""
+    return seed + RESTART_SEED_STRIDE * r
+
+
+def restart_key(r: int, key: str) -> str:
+    """The name of restart ``r``'s metric ``key``: restart 0 under the plain name, restart r > 0 under
+    ``restart<r>/``."""
+    return key if r == 0 else f"restart{r}/{key}"
 
 
 class MeanTranslator:
@@ -480,12 +501,13 @@ def train_restarts(demos: dict[str, Transitions], random_x: dict[str, Transition
     trs, stats = [], []
     for r in range(cfg.restarts):
         log_r = log if r == 0 or log is None else (
-            lambda m, i, r=r: log({f"restart{r}/{k}": v for k, v in m.items()}, i))
-        tr, st = train_translator(demos, random_x, y_random, dyn, cfg, seed + RESTART_SEED_STRIDE * r, log=log_r,
+            lambda m, i, r=r: log({restart_key(r, k): v for k, v in m.items()}, i))
+        tr, st = train_translator(demos, random_x, y_random, dyn, cfg, restart_seed(seed, r), log=log_r,
                                   **kwargs)
         trs.append(tr)
         stats.append(st)
     return trs, stats
+
 
 def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Transitions],
                       random_x: dict[str, Transitions], y_random: np.ndarray, cfg: TranslatorConfig,
@@ -513,7 +535,8 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
         out = losses(x0, x, x2, pidx)
         y_hat = out["y_hat"]
         # --- D step (fakes detached; with a pool, half of them come from past generators, as in Cycle-Dynamics)
-        fake = y_hat.detach()
+        y_adv = y_hat if cfg.adv_on == "all" else y_hat[len(xd):]  # the batch is [demonstrations, X random]
+        fake = y_adv.detach()
         if cfg.history_size:
             if len(pool):
                 n_old = len(fake) // 2
@@ -524,15 +547,15 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
             pool = torch.cat([pool, fake])[-cfg.history_size:]
         else:
             fake_d = fake
-        y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_hat),), generator=gen).to(device)]
-        d_both = tr.D(torch.cat([y_real, fake_d]))
+        y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_adv),), generator=gen).to(device)]
+        d_both = tr.disc(torch.cat([y_real, fake_d]))
         d_real, d_fake = d_both[:len(y_real)], d_both[len(y_real):]
         l_d = d_loss_fn(d_real, d_fake)
         opt_d.zero_grad(set_to_none=True)
         l_d.backward()
         opt_d.step()
         # --- G step
-        l_adv = g_loss_fn(tr.D(y_hat))
+        l_adv = g_loss_fn(tr.disc(y_adv))
         loss = (cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
                 + cfg.lambda_hand * out["hand"])
         opt_g.zero_grad(set_to_none=True)
@@ -603,9 +626,9 @@ def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorC
         yr = tr.generate(xr, pr, xr0 if len(tr.fk_q) else None)
         y_real = dyn.y_norm(torch.as_tensor(y_random[torch.randperm(len(y_random), generator=gen)[:max_random]
                                                        .numpy()]))
-        out["D/accuracy_translated_demos"] = float((tr.D(h["y_hat"]) < 0).float().mean())
-        out["D/accuracy_translated_random"] = float((tr.D(yr) < 0).float().mean())
-        out["D/accuracy_real_y"] = float((tr.D(y_real) > 0).float().mean())
+        out["D/accuracy_translated_demos"] = float((tr.disc(h["y_hat"]) < 0).float().mean())
+        out["D/accuracy_translated_random"] = float((tr.disc(yr) < 0).float().mean())
+        out["D/accuracy_real_y"] = float((tr.disc(y_real) > 0).float().mean())
         if all(t.a is not None for t in demos.values()):
             n_a = len(tl.arm_action_columns("r1"))
             errs = []

@@ -206,3 +206,41 @@ def test_restarts_translate_with_the_mean_of_their_outputs(tiny):
     assert torch.equal(translation.MeanTranslator(trs[:1]).translate(x, "R1H"), single.translate(x, "R1H"))
     assert len(stats) == 2 and any(all(k.startswith("restart1/") for k in m) for m in logged)
     assert any(not any(k.startswith("restart") for k in m) for m in logged)
+
+
+def test_discriminator_can_see_the_robots_only(tiny):
+    """disc_input 'robots': D's input is the robots' columns, so the (copied) object cannot tell it anything; 'state'
+    (the paper) sees every column."""
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    y = np.zeros((10, 19), np.float32)
+    cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16,
+                           kinematics="learned")
+    n_obj = len(layout.BOX_PUSH.object_cols)
+    for disc_input, n_in in (("state", 19), ("robots", 19 - n_obj)):
+        tr, _ = translation.train_translator(random_x, random_x, y, dyn,
+                                             cfg.model_copy(update={"disc_input": disc_input}), seed=0)
+        assert tr.D[0].in_features == n_in
+        yb = torch.randn(5, 19)
+        moved = yb.clone()
+        moved[:, -n_obj:] += 3.0
+        same = torch.equal(tr.disc(yb), tr.disc(moved))
+        assert same == (disc_input == "robots")
+
+
+def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
+    """adv_on 'random': D and L_adv see only the translated X random motion (the batch's second half); 'all' (the
+    paper) the whole batch."""
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    y = np.zeros((10, 19), np.float32)
+    cfg = TranslatorConfig(iterations=3, hidden=[16], log_every=10, select_every=10, batch_size=16,
+                           kinematics="learned")
+    for adv_on, fakes in (("all", 16), ("random", 8)):
+        sizes = []
+        orig = translation.Translator.disc
+        monkeypatch.setattr(translation.Translator, "disc", lambda self, yb: sizes.append(len(yb)) or orig(self, yb))
+        translation.train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0)
+        monkeypatch.setattr(translation.Translator, "disc", orig)
+        # per iteration: D on real + fakes, then L_adv on the fakes
+        assert sizes[:2] == [2 * fakes, fakes]

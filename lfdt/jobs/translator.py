@@ -39,7 +39,7 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
         for r, tr in enumerate(trs):
             save_state(tr, cfg.dir(TRANSLATORS) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
                 **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
-                "init_seed": cfg.seed + translation.RESTART_SEED_STRIDE * r,
+                "init_seed": translation.restart_seed(cfg.seed, r),
                 "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},
                 "y_columns": layout.state_columns("Y"), "episodes": episodes,
                 "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
@@ -58,15 +58,15 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
             for r, tr in enumerate(trs):
                 d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, kinematics=kin,
                                                        seed=cfg.seed)
-                diag.update(d if r == 0 else {f"restart{r}/{k}": v for k, v in d.items()})
+                diag.update({translation.restart_key(r, k): v for k, v in d.items()})
         diag.update(translation.translation_diagnostics(df, demo_paths, episodes))
         stats = all_stats[0]
         curve = stats.pop("curve")
         restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
         for r, st in enumerate(all_stats[1:], 1):
             st.pop("curve")
-            restarts.update({f"restart{r}/final/{k}": v for k, v in st.pop("final").items()})
-            restarts.update({f"restart{r}/{k}": v for k, v in st.items()})
+            restarts.update({translation.restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
+            restarts.update({translation.restart_key(r, k): v for k, v in st.items()})
         metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
                    **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
                    "mlflow_run_id": run.run_id}

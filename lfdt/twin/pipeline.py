@@ -175,7 +175,8 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
                                                 std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device)
     for r, tr in enumerate(trs):
         save_state(tr, models_dir / ("translator.pt" if r == 0 else f"translator_r{r}.pt"),
-                   {"translator": cfg.model_dump(), "task": task, "seed": seed, "restart": r})
+                   {"translator": cfg.model_dump(), "task": task, "seed": seed, "restart": r,
+                    "init_seed": translation.restart_seed(seed, r)})
     tstats = all_stats[0]
     dt = TwinConfig().control_dt
     translated = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, cfg, dt, tl,
