@@ -236,10 +236,15 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=3, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
+    orig = translation.Translator.disc
     for adv_on, fakes in (("all", 16), ("random", 8)):
-        sizes = []
-        orig = translation.Translator.disc
-        monkeypatch.setattr(translation.Translator, "disc", lambda self, yb: sizes.append(len(yb)) or orig(self, yb))
+        sizes: list[int] = []
+
+        def counting_disc(self, yb, sizes=sizes):
+            sizes.append(len(yb))
+            return orig(self, yb)
+
+        monkeypatch.setattr(translation.Translator, "disc", counting_disc)
         translation.train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0)
         monkeypatch.setattr(translation.Translator, "disc", orig)
         # per iteration: D on real + fakes, then L_adv on the fakes
