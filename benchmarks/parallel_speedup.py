@@ -21,6 +21,7 @@ import torch
 from lfdt import layout, parallel, translation
 from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
+from lfdt.jobs.translator import box_push_kinematics
 
 
 def _transitions(n: int, rng: np.random.Generator) -> translation.Transitions:
@@ -41,7 +42,7 @@ def translator_job(job: tuple[int, int], progress=None) -> float:
     cfg = TranslatorConfig(iterations=iterations, select_every=500, log_every=500)
     t0 = time.perf_counter()
     translation.train_translator(demos, rand, y, dyn, cfg, seed=seed, progress=progress, held_out=held,
-                                 kinematics=translation.Kinematics.of_box_push(EnvConfig()))
+                                 kinematics=box_push_kinematics(EnvConfig()), tl=layout.BOX_PUSH)
     return time.perf_counter() - t0
 
 

@@ -25,6 +25,7 @@ import torch.nn.functional as nnf
 from lfdt import bc, layout, translation
 from lfdt.config import BCConfig, EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
+from lfdt.jobs.translator import box_push_kinematics
 from lfdt.nets import mlp
 
 
@@ -38,7 +39,7 @@ def ours_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels, rng)
     rand = {p: fake_transitions(20_000, 21, rng) for p in layout.PAIRINGS}
     y = rng.normal(size=(20_000, 19)).astype(np.float32)
     _, st = translation.train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0,
-                                         kinematics=translation.Kinematics.of_box_push(EnvConfig()))
+                                         kinematics=box_push_kinematics(EnvConfig()), tl=layout.BOX_PUSH)
     return st["iterations_per_s"]
 
 
@@ -77,7 +78,7 @@ def ours_bc(iters: int, cfg: BCConfig, rng) -> float:
                       columns=[layout.STATE_PREFIX + c for c in layout.state_columns("Y")] +
                       [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")])
     df["episode_index"] = np.arange(n) // 25
-    task = bc.tasks_for("lfdt", translated=df)[0]
+    task = bc.tasks_for("lfdt", translated=df, tl=layout.BOX_PUSH)[0]
     _, st = bc.train_member(task, cfg.model_copy(update={"iterations": iters}), seed=0)
     return st["iterations_per_s"]
 

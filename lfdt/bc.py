@@ -25,7 +25,7 @@ from torch import nn
 
 from lfdt import layout, methods
 from lfdt.config import BCConfig
-from lfdt.layout import BOX_PUSH, TaskLayout
+from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, check_finite, load_state, mlp, read_config, save_state
 
 
@@ -66,7 +66,7 @@ class BCTask:
 
 
 def tasks_for(method: str, translated: pd.DataFrame | None = None,
-              raw_demos: dict[str, pd.DataFrame] | None = None, tl: TaskLayout = BOX_PUSH) -> list[BCTask]:
+              raw_demos: dict[str, pd.DataFrame] | None = None, *, tl: TaskLayout) -> list[BCTask]:
     """The members a method trains, with their data."""
     if methods.get(method).data == "raw":
         out = []
@@ -145,7 +145,7 @@ def train_member(task: BCTask, cfg: BCConfig, seed: int, log: Callable[[dict, in
 class BCPolicy:
     """A trained policy for domain Y: its members' actions, put in Y's action order, optionally clipped."""
 
-    def __init__(self, members: list[BCMember], tl: TaskLayout = BOX_PUSH,
+    def __init__(self, members: list[BCMember], tl: TaskLayout,
                  action_bounds: tuple[float, float] | None = (-1.0, 1.0)):
         self.members = members
         self.action_bounds = action_bounds
@@ -172,7 +172,7 @@ class BCPolicy:
                        {**config, "member": name, "in_columns": m.in_columns, "out_columns": m.out_columns})
 
     @classmethod
-    def load(cls, model_dir: Path, tl: TaskLayout = BOX_PUSH,
+    def load(cls, model_dir: Path, tl: TaskLayout,
              action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> tuple[BCPolicy, dict]:
         """Load every member of a saved policy (``weights_only=True``)."""
         members, cfg = [], None

@@ -201,7 +201,7 @@ def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> l
     return full
 
 
-def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskLayout = layout.BOX_PUSH) -> dict:
+def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskLayout) -> dict:
     """Validate a transitions file's identity (:func:`check_identity`) and its schema against the layout; returns
     its metadata. Raises DataFileError, naming the file."""
     meta = check_identity(path, kind, domain)
@@ -215,7 +215,7 @@ def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskL
     else:
         robot = layout.robot_arm(domain)
         expected += [layout.ACTION_PREFIX + c for c in tl.arm_action_columns(robot)]
-        if tl is layout.BOX_PUSH:  # the simulated human stand-in's torques are recorded; a tracked hand has none
+        if tl.hand_actions_recorded:
             expected += [layout.HUMAN_ACTION_PREFIX + c for c in tl.arm_action_columns("h")]
     expected += [layout.NEXT_STATE_PREFIX + c for c in tl.state_columns(domain)]
     missing = [c for c in expected if c not in schema.names]

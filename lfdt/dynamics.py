@@ -25,7 +25,7 @@ from torch import nn
 
 from lfdt import data, layout
 from lfdt.config import DynamicsConfig
-from lfdt.layout import BOX_PUSH, TaskLayout
+from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, batches, check_finite, mlp
 
 
@@ -60,7 +60,7 @@ class RandomY:
     action_columns: list[str]
 
 
-def load_random_y(path, tl: TaskLayout = BOX_PUSH) -> RandomY:
+def load_random_y(path, tl: TaskLayout) -> RandomY:
     """Read Y's random-motion transitions (a file or a recording directory) into arrays, columns by name."""
     cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
     df = data.read_transitions(path, kind="random", domain="Y", task=tl.name)

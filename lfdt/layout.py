@@ -43,15 +43,13 @@ def arm_action_columns(arm: str) -> list[str]:
 
 
 def state_columns(domain: str) -> list[str]:
-    """State column names of a domain, in observation-vector order."""
-    a1, a2 = DOMAIN_ARMS[domain]
-    return arm_columns(a1) + arm_columns(a2) + list(OBJECT_COLUMNS)
+    """State column names of a box-push domain, in observation-vector order (:data:`BOX_PUSH`'s)."""
+    return BOX_PUSH.state_columns(domain)
 
 
 def action_columns(domain: str) -> list[str]:
-    """Action column names of a domain, in action-vector order (both slots)."""
-    a1, a2 = DOMAIN_ARMS[domain]
-    return arm_action_columns(a1) + arm_action_columns(a2)
+    """Action column names of a box-push domain, in action-vector order (both slots; :data:`BOX_PUSH`'s)."""
+    return BOX_PUSH.action_columns(domain)
 
 
 def robot_arm(pairing: str) -> str:
@@ -90,13 +88,16 @@ class TaskLayout:
     """
 
     def __init__(self, name: str, arm_cols: dict[str, list[str]], action_cols: dict[str, list[str]],
-                 object_cols: list[str], position_cols: dict[str, list[str]]):
+                 object_cols: list[str], position_cols: dict[str, list[str]], hand_actions_recorded: bool = False):
         self.name = name
         self.arm_cols = {k: list(v) for k, v in arm_cols.items()}
         self.action_cols = {k: list(v) for k, v in action_cols.items()}
         self.object_cols = list(object_cols)
         self.position_cols = {k: list(v) for k, v in position_cols.items()}
         """Per arm, the columns of its end (hand) position in the world frame."""
+        self.hand_actions_recorded = hand_actions_recorded
+        """Whether demonstrations record the human's actions too (a simulated stand-in's torques; a tracked hand has
+        none)."""
 
     def arm_columns(self, arm: str) -> list[str]:
         """State columns of one arm."""
@@ -133,5 +134,5 @@ class TaskLayout:
 
 BOX_PUSH = TaskLayout("box_push", {a: arm_columns(a) for a in ARM_JOINTS},
                       {a: arm_action_columns(a) for a in ARM_JOINTS}, list(OBJECT_COLUMNS),
-                      {a: [f"{a}.ee_x", f"{a}.ee_y"] for a in ARM_JOINTS})
+                      {a: [f"{a}.ee_x", f"{a}.ee_y"] for a in ARM_JOINTS}, hand_actions_recorded=True)
 """The simulated 2D dual-arm box push (the module-level functions above describe the same layout)."""

@@ -32,10 +32,9 @@ import torch.nn.functional as nnf
 from torch import nn
 
 from lfdt import data, layout, methods
-from lfdt.config import EnvConfig, TranslatorConfig
+from lfdt.config import TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.envs import BoxPushEnv
-from lfdt.layout import BOX_PUSH, TaskLayout
+from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, check_finite, mlp
 
 PAIRING_INDEX = {p: i for i, p in enumerate(layout.PAIRINGS)}
@@ -49,7 +48,7 @@ def method_config(method: str, cfg: TranslatorConfig) -> TranslatorConfig:
     return cfg.model_copy(update=m.overrides)
 
 
-def canonical_x_columns(pairing: str, tl: TaskLayout = BOX_PUSH) -> list[str]:
+def canonical_x_columns(pairing: str, tl: TaskLayout) -> list[str]:
     """G's input columns of a pairing: the robot that is there, the human stand-in, the object."""
     return tl.canonical_x_columns(pairing)
 
@@ -80,21 +79,6 @@ class Kinematics:
     dt: float
     """Control step, s."""
 
-    @classmethod
-    def of_box_push(cls, env_cfg: EnvConfig) -> Kinematics:
-        """The two 3-link robots of the box push's domain Y."""
-        from lfdt.envs import arm_specs
-
-        cols = layout.state_columns("Y")
-        out = []
-        for arm in arm_specs("Y", env_cfg):
-            n = arm.name
-            out.append(ArmKinematics([cols.index(f"{n}.q{i}") for i in range(arm.n)],
-                                     [cols.index(f"{n}.dq{i}") for i in range(arm.n)],
-                                     [cols.index(f"{n}.ee_x"), cols.index(f"{n}.ee_y")],
-                                     list(arm.cfg.links), list(arm.base)))
-        return cls(out, env_cfg.timestep * env_cfg.frame_skip)
-
 
 def forward_kinematics(q: torch.Tensor, links: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
     """End positions (..., 2) of a planar arm for joint angles q (..., n), differentiable."""
@@ -121,8 +105,8 @@ class Transitions:
                            None if self.a is None else self.a[m], None if self.x_prev is None else self.x_prev[m])
 
 
-def load_x_transitions(path, pairing: str, episodes: list[int] | None = None,
-                       tl: TaskLayout = BOX_PUSH, with_actions: bool = False, *, kind: str) -> Transitions:
+def load_x_transitions(path, pairing: str, episodes: list[int] | None = None, *, tl: TaskLayout,
+                       with_actions: bool = False, kind: str) -> Transitions:
     """State pairs of an X dataset (``kind`` 'random' or 'demos', checked), canonical column order, optionally some
     episodes only; ``with_actions`` also reads the real robot's recorded action (for diagnostics)."""
     cols = tl.canonical_x_columns(pairing)
@@ -166,7 +150,7 @@ def split_held_out(sets: dict[str, Transitions], fraction: float, seed: int
 class Translator(nn.Module):
     """G, D and the X normalisers of both pairings, saved as one state dict."""
 
-    def __init__(self, hidden: list[int], tl: TaskLayout = BOX_PUSH, slope: float = 0.2,
+    def __init__(self, hidden: list[int], tl: TaskLayout, slope: float = 0.2,
                  kinematics: Kinematics | None = None, d_cols: list[int] | None = None):
         super().__init__()
         x_dim = len(tl.canonical_x_columns("R1H"))
@@ -268,7 +252,7 @@ class Translator(nn.Module):
             return self.generate(xt, idx, torch.cat([xt[:1], xt[:-1]]))
 
 
-def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout = BOX_PUSH) -> list[tuple[str, str]]:
+def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout) -> list[tuple[str, str]]:
     """(x column, y column) pairs G adds to its output: quantities observed in the same world frame in X and Y.
 
     object_mode 'correct' or 'copy': the object's pose (the same object, seen alike in both domains);
@@ -285,7 +269,7 @@ def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout =
 
 def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dict[str, Transitions],
                       std_floor: float, object_mode: str = "translate", hand_skip: bool = False,
-                      tl: TaskLayout = BOX_PUSH) -> None:
+                      *, tl: TaskLayout) -> None:
     """Robot and object columns take Y's statistics; the human's come from that pairing's X random data.
 
     Also sets the skip connections, converting each copied x column from its normalisation to its y column's.
@@ -428,7 +412,7 @@ def _normalised(tr: Translator, sets: dict[str, Transitions], device: str | torc
 def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
                      dyn: DynamicsModels, cfg: TranslatorConfig, seed: int, std_floor: float = 1e-2,
                      log: Callable[[dict, int], None] | None = None, progress=None,
-                     tl: TaskLayout = BOX_PUSH, kinematics: Kinematics | None = None,
+                     *, tl: TaskLayout, kinematics: Kinematics | None = None,
                      held_out: dict[str, Transitions] | None = None, device: str | torch.device = "cpu"
                      ) -> tuple[Translator, dict]:
     """Train G and D with eq. 6 (frozen F, F^-1) on ``device``. Returns the translator (on the CPU, as ``dyn``
@@ -452,7 +436,7 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
                     d_cols=d_cols)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
-    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl)
+    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
     try:
         tr.to(device)
         dyn.to(device)
@@ -599,7 +583,7 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
 
 def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig,
                            demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
-                           tl: TaskLayout = BOX_PUSH, kinematics: Kinematics | None = None,
+                           *, tl: TaskLayout, kinematics: Kinematics | None = None,
                            max_random: int = 20_000, seed: int = 0) -> dict:
     """What the trained translator does, measured on demonstrations (not trained on) and random motion.
 
@@ -654,7 +638,7 @@ def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorC
 
 
 def translate_demos(tr: Translator | MeanTranslator, dyn: DynamicsModels, demos_path: dict[str, str],
-                    episodes: dict[str, list[int]], cfg: TranslatorConfig, dt: float, tl: TaskLayout = BOX_PUSH,
+                    episodes: dict[str, list[int]], cfg: TranslatorConfig, dt: float, tl: TaskLayout,
                     action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> pd.DataFrame:
     """Translate every chosen demonstration of both pairings into Y states with BC action labels (raw units).
 
@@ -698,7 +682,7 @@ def translate_demos(tr: Translator | MeanTranslator, dyn: DynamicsModels, demos_
     return pd.concat(frames, ignore_index=True)
 
 
-def translated_table(df: pd.DataFrame, metadata: dict, tl: TaskLayout = BOX_PUSH) -> pa.Table:
+def translated_table(df: pd.DataFrame, metadata: dict, tl: TaskLayout) -> pa.Table:
     """The translated demonstrations as a documented Arrow table (Y layout, same conventions as every dataset)."""
     schema = data.transitions_schema(
         tl.state_columns("Y"), tl.action_columns("Y"),
@@ -708,41 +692,8 @@ def translated_table(df: pd.DataFrame, metadata: dict, tl: TaskLayout = BOX_PUSH
     return pa.Table.from_pandas(df[[f.name for f in schema]], schema=schema, preserve_index=False)
 
 
-def replay_check(df: pd.DataFrame, env_cfg: EnvConfig) -> dict:
-    """Replay each translated demonstration's action labels in the real Y environment from its first state.
-
-    Returns how far the replayed box ends from the translated box's final pose (mean position error in m,
-    mean absolute yaw error in rad) and how often the replay solves the task: a physical-consistency check.
-    """
-    env = BoxPushEnv("Y", env_cfg)
-    cols = layout.state_columns("Y")
-    q_cols = [c for c in cols if ".q" in c]
-    dq_cols = [c for c in cols if ".dq" in c]
-    a_cols = [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]
-    pos_err, yaw_err, solved = [], [], []
-    for _, g in df.groupby("episode_index", sort=True):
-        g = g.sort_values("frame_index")
-        first = g.iloc[0]
-        qpos = np.concatenate([[first[layout.STATE_PREFIX + c] for c in q_cols],
-                               [first[layout.STATE_PREFIX + c] for c in layout.OBJECT_COLUMNS]])
-        qvel = np.concatenate([[first[layout.STATE_PREFIX + c] for c in dq_cols], np.zeros(3)])
-        env.reset(seed=0)
-        env.set_state(qpos, qvel)
-        success = False
-        for a in g[a_cols].to_numpy():
-            _, _, term, _, info = env.step(a)
-            success = success or term
-        final = env.data.qpos[env.scene.box_qpos]
-        target = g.iloc[-1][[layout.NEXT_STATE_PREFIX + c for c in layout.OBJECT_COLUMNS]].to_numpy(float)
-        pos_err.append(float(np.linalg.norm(final[:2] - target[:2])))
-        yaw_err.append(float(abs((final[2] - target[2] + np.pi) % (2 * np.pi) - np.pi)))
-        solved.append(success)
-    return {"replay_box_position_error_m": float(np.mean(pos_err)), "replay_box_yaw_error_rad": float(np.mean(yaw_err)),
-            "replay_success_rate": float(np.mean(solved)), "replayed_demos": len(pos_err)}
-
-
 def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episodes: dict[str, list[int]],
-                            tl: TaskLayout = BOX_PUSH) -> dict:
+                            tl: TaskLayout) -> dict:
     """Compare translated states with the source where they should agree (diagnostics only, never trained on).
 
     * the real robot's end position, and the object's pose (m, rad): translation should keep them;

@@ -27,7 +27,7 @@ def run() -> None:
         with stage.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
         data.write_table(table, out)
-        data.check_transitions(out, "demos", args.pairing)
+        data.check_transitions(out, "demos", args.pairing, layout.BOX_PUSH)
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)
         stage.write_report(Path("reports/demos") / f"{args.pairing}.json",

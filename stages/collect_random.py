@@ -20,7 +20,7 @@ def run() -> None:
         with stage.progress(cfg.transitions, f"random {args.domain}", "tr") as bar:
             table, stats = random_motion.collect_random(args.domain, p.env, cfg, progress=bar.update)
         data.write_table(table, out)
-        data.check_transitions(out, "random", args.domain)
+        data.check_transitions(out, "random", args.domain, layout.BOX_PUSH)
         stats["file_mb"] = out.stat().st_size / 1e6
         stats["stage_wall_s"] = stage.wall_since_start()
         run.metrics(stats)

@@ -13,7 +13,7 @@ def run() -> None:
     args = ap.parse_args()
     p = stage.params(args.params)
     cfg, device = p.dynamics, torch_device(p.device)
-    d = dynamics.load_random_y("data/random/Y.parquet")
+    d = dynamics.load_random_y("data/random/Y.parquet", layout.BOX_PUSH)
     with mlflow_runs.stage_run("fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
                                tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as run:
         with stage.progress(cfg.iterations, "F and F^-1", "it") as bar:

@@ -116,12 +116,14 @@ def test_translator_trains_on_cuda_and_comes_back_on_the_cpu(tmp_path):
         table, _ = collect_random(dom, EnvConfig(), RandomConfig(transitions=1_000, episodes_per_batch=20))
         paths[dom] = data.write_table(table, tmp_path / f"{dom}.parquet")
     dyn = DynamicsModels(19, 6, [32, 32])
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=layout.BOX_PUSH)
+                for p in layout.PAIRINGS}
     train, held = translation.split_held_out(random_x, 0.25, seed=0)
     cfg = TranslatorConfig(iterations=100, hidden=[32, 32], log_every=50, select_every=50, batch_size=32,
                            kinematics="learned", history_size=64)
     y = np.random.default_rng(0).normal(size=(500, 19)).astype(np.float32)
-    tr, stats = translation.train_translator(train, random_x, y, dyn, cfg, seed=0, held_out=held, device="cuda")
+    tr, stats = translation.train_translator(train, random_x, y, dyn, cfg, seed=0, held_out=held, device="cuda",
+                                             tl=layout.BOX_PUSH)
     assert _on_cpu(tr) and _on_cpu(dyn) and np.isfinite(stats["selected_heldout_loss"])
 
 

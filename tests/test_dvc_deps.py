@@ -95,8 +95,22 @@ def test_stage_deps_cover_import_closure(name, cmd, deps):
     assert not missing, f"stage {name} imports {missing} but dvc.yaml does not list them in its deps"
 
 
+@pytest.mark.parametrize("name, cmd, deps", stages(), ids=[s[0] for s in stages()])
+def test_stage_deps_list_no_code_the_stage_does_not_import(name, cmd, deps):
+    """A code dep the command never imports reruns the stage for nothing (and every no-op repro checks it)."""
+    files: set[Path] = set()
+    for s in re.findall(r"(stages/[\w/]+\.py)", cmd):
+        files |= closure(ROOT / s)
+    for m in re.findall(r"python -m ([\w.]+)", cmd):
+        files |= closure(module_file(m))
+    imported = {f.relative_to(ROOT).as_posix() for f in files}
+    extra = [d for d in deps if d.endswith(".py") and d not in imported]
+    assert not extra, f"stage {name} lists {extra} in its deps but never imports them"
+
+
 def test_closure_follows_imports_transitively():
-    # stages/train_translator.py imports lfdt.translation, which imports lfdt.dynamics and lfdt.envs
+    # stages/train_translator.py imports lfdt.jobs.translator, which imports lfdt.translation, lfdt.dynamics and
+    # lfdt.envs
     files = {f.relative_to(ROOT).as_posix() for f in closure(ROOT / "stages/train_translator.py")}
     assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/envs.py", "lfdt/config.py"} <= files
 

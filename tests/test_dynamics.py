@@ -7,6 +7,7 @@ import torch
 from lfdt import data
 from lfdt.config import DynamicsConfig, EnvConfig, RandomConfig
 from lfdt.dynamics import DynamicsModels, fit_dynamics, load_random_y, split_episodes
+from lfdt.layout import BOX_PUSH
 from lfdt.nets import load_state, save_state
 from lfdt.random_motion import collect_random
 
@@ -15,7 +16,7 @@ from lfdt.random_motion import collect_random
 def random_y(tmp_path_factory):
     table, _ = collect_random("Y", EnvConfig(), RandomConfig(transitions=6_000, episodes_per_batch=20))
     path = data.write_table(table, tmp_path_factory.mktemp("dyn") / "Y.parquet")
-    return load_random_y(path)
+    return load_random_y(path, BOX_PUSH)
 
 
 def test_split_keeps_episodes_whole():

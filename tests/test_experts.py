@@ -43,7 +43,7 @@ def test_train_save_load_and_demos(tmp_path, protocol):
     assert ev["episodes"] == 3 and 0.0 <= ev["success_rate"] <= 1.0
     table, st = experts.collect_demos(loaded, "R1H", env_cfg, demos_cfg)
     path = data.write_table(table, tmp_path / "R1H.parquet")
-    meta = data.check_transitions(path, "demos", "R1H")
+    meta = data.check_transitions(path, "demos", "R1H", layout.BOX_PUSH)
     assert meta["robot"] == "r1" and meta["protocol"] == protocol
     assert st["demonstrations"] == 2 and st["attempts"] == 2
     df = data.read_transitions(path)

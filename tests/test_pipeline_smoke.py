@@ -53,11 +53,11 @@ def test_every_stage_ran(project):
 def test_artifact_schemas(project):
     dst, _ = project
     for domain in layout.DOMAINS:
-        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain)
+        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain, layout.BOX_PUSH)
         assert data.read_transitions(dst / f"data/random/{domain}.parquet").shape[0] == 3000
         assert meta["random"]["transitions"] == 3000
     for pairing in layout.PAIRINGS:
-        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing)
+        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing, layout.BOX_PUSH)
         df = data.read_transitions(dst / f"data/demos/{pairing}.parquet")
         assert df.episode_index.nunique() == 4
         cfg = json.loads((dst / f"models/experts/{pairing}/config.json").read_text())

@@ -37,7 +37,7 @@ def test_collect_random_table(tmp_path):
     table, stats = collect_random("HR2", CFG, cfg)
     assert table.num_rows == 1_050 and stats["episodes"] == 11
     path = data.write_table(table, tmp_path / "HR2.parquet")
-    meta = data.check_transitions(path, "random", "HR2")
+    meta = data.check_transitions(path, "random", "HR2", layout.BOX_PUSH)
     assert meta["seed"] == 0 and meta["env"]["frame_skip"] == CFG.frame_skip
     assert meta["layout"]["domains"]["HR2"]["state"] == layout.state_columns("HR2")
     df = data.read_transitions(path)
@@ -66,12 +66,12 @@ def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
     # a random-motion file handed over as demonstrations is refused before anything trains on it
     with pytest.raises(data.DataFileError, match=r"R1H.parquet holds random data of domain R1H \(kind 'random' "
                                                  r"where 'demos' is needed\)"):
-        translation.load_x_transitions(path, "R1H", kind="demos")
+        translation.load_x_transitions(path, "R1H", kind="demos", tl=layout.BOX_PUSH)
     with pytest.raises(data.DataFileError, match=r"domain 'R1H' where 'HR2' is needed"):
         data.read_transitions(path, kind="random", domain="HR2")
     with pytest.raises(data.DataFileError, match=r"task 'box_push' where 'block_push' is needed"):
         data.read_transitions(path, task="block_push")
-    assert len(translation.load_x_transitions(path, "R1H", kind="random").x) == 200
+    assert len(translation.load_x_transitions(path, "R1H", kind="random", tl=layout.BOX_PUSH).x) == 200
     # corrupted bytes: the error names the file
     bad = tmp_path / "bad.parquet"
     raw = path.read_bytes()

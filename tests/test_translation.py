@@ -8,7 +8,12 @@ import torch
 from lfdt import data, layout, translation
 from lfdt.config import EnvConfig, RandomConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
+from lfdt.envs import replay_check
+from lfdt.jobs.translator import box_push_kinematics
 from lfdt.random_motion import collect_random
+
+TL = layout.BOX_PUSH
+"""The task these tests translate: the simulated box push."""
 
 
 def test_methods_are_weights_at_zero():
@@ -25,10 +30,10 @@ def test_methods_are_weights_at_zero():
 
 def test_canonical_columns_and_robot_slot():
     for p in layout.PAIRINGS:
-        cols = translation.canonical_x_columns(p)
+        cols = translation.canonical_x_columns(p, TL)
         assert cols[:8] == layout.arm_columns(layout.robot_arm(p)) and cols[8:18] == layout.arm_columns("h")
         y = layout.state_columns("Y")
-        assert y[layout.BOX_PUSH.robot_y_slice(p)] == layout.arm_columns(layout.robot_arm(p))
+        assert y[TL.robot_y_slice(p)] == layout.arm_columns(layout.robot_arm(p))
 
 
 @pytest.fixture(scope="module")
@@ -48,16 +53,16 @@ def tiny(tmp_path_factory):
 
 def test_skips_put_hand_and_object_where_they_belong(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
-    tr = translation.Translator([16])
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True)
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    tr = translation.Translator([16], TL)
+    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True, tl=TL)
     torch.nn.init.zeros_(tr.G[-1].weight)
     torch.nn.init.zeros_(tr.G[-1].bias)  # G's own output is 0: only the skips remain
     y_cols = layout.state_columns("Y")
     for p in layout.PAIRINGS:
         x = random_x[p].x[:5]
         y = dyn.y_norm.inverse(tr.translate(x, p)).numpy()
-        cols = translation.canonical_x_columns(p)
+        cols = translation.canonical_x_columns(p, TL)
         missing = "r2" if layout.robot_arm(p) == "r1" else "r1"
         np.testing.assert_allclose(y[:, y_cols.index(f"{missing}.ee_x")], x[:, cols.index("h.ee_x")], atol=1e-5)
         np.testing.assert_allclose(y[:, y_cols.index("box.yaw")], x[:, cols.index("box.yaw")], atol=1e-5)
@@ -68,10 +73,11 @@ def test_skips_put_hand_and_object_where_they_belong(tiny):
 
 def test_identity_loss_pulls_the_real_robot_only(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            log_every=100, batch_size=32, kinematics="learned")
-    tr, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
+    tr, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
+                                             tl=TL)
     assert [c["iteration"] for c in stats["curve"]] == [100, 200, 300]
     assert stats["curve"][-1]["loss/id"] < 0.5 * stats["curve"][0]["loss/id"]
     assert stats["curve"][-1]["loss/dyn"] > 0 and stats["curve"][-1]["loss/adv"] > 0  # measured, not trained
@@ -82,25 +88,25 @@ def test_replay_of_true_transitions_is_consistent(tiny):
     env, paths, _ = tiny
     df = data.read_transitions(paths["Y"])
     df = df[df.episode_index < 3]
-    res = translation.replay_check(df, env)
+    res = replay_check(df, env)
     assert res["replayed_demos"] == 3
     assert res["replay_box_position_error_m"] < 1e-6 and res["replay_box_yaw_error_rad"] < 1e-6
     shuffled = df.copy()
     acts = [f"action.{c}" for c in layout.action_columns("Y")]
     shuffled[acts] = -shuffled[acts].to_numpy()
-    assert translation.replay_check(shuffled, env)["replay_box_position_error_m"] > 1e-4
+    assert replay_check(shuffled, env)["replay_box_position_error_m"] > 1e-4
 
 
 def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
     """With Y's robot model, a translated episode's ends are the FK of its joints and its joint velocities the
     change of its joint angles per control step (zero at the start, where the arms are at rest)."""
     env, paths, dyn = tiny
-    kin = translation.Kinematics.of_box_push(env)
-    tr = translation.Translator([16], kinematics=kin)
+    kin = box_push_kinematics(env)
+    tr = translation.Translator([16], TL, kinematics=kin)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
     y_cols = layout.state_columns("Y")
     from lfdt.envs import arm_specs, forward_kinematics
 
@@ -119,7 +125,7 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
 
 def test_held_out_split_and_checkpoint_selection(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     train, held = translation.split_held_out(random_x, 0.25, seed=0)
     for p in layout.PAIRINGS:
         assert not set(train[p].episode) & set(held[p].episode)
@@ -128,7 +134,7 @@ def test_held_out_split_and_checkpoint_selection(tiny):
     cfg = TranslatorConfig(iterations=200, hidden=[32, 32], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            log_every=50, select_every=50, batch_size=32, kinematics="learned")
     tr, stats = translation.train_translator(train, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
-                                             held_out=held)
+                                             held_out=held, tl=TL)
     losses = [c["heldout/selection_loss"] for c in stats["curve"] if "heldout/selection_loss" in c]
     assert len(losses) == 4 and stats["selected_heldout_loss"] == pytest.approx(min(losses))
     assert stats["selected_iteration"] == 50 * (1 + int(np.argmin(losses)))
@@ -136,31 +142,31 @@ def test_held_out_split_and_checkpoint_selection(tiny):
 
 def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
                            lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
-    _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0)
+    _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
     assert stats["curve"][-1]["loss/hand"] < 0.5 * stats["curve"][0]["loss/hand"]
 
 
 def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
-    tr = translation.Translator([16])
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2)
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    tr = translation.Translator([16], TL)
+    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
     x0, x, x2, pidx = translation._normalised(tr, random_x)
-    full = translation._Losses(tr, dyn, TranslatorConfig(), layout.BOX_PUSH)(x0, x, x2, pidx)
-    none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), layout.BOX_PUSH)(x0, x, x2, pidx)
+    full = translation._Losses(tr, dyn, TranslatorConfig(), TL)(x0, x, x2, pidx)
+    none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), TL)(x0, x, x2, pidx)
     obj = full["dyn_sq"][:, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[1]
     assert float(none["dyn"].detach()) == pytest.approx(float((full["dyn"] - obj).detach()), rel=1e-4)
 
 
 def test_forward_kinematics_needs_a_robot_model(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     with pytest.raises(ValueError, match="needs the arms' kinematics"):
         translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
-                                     TranslatorConfig(iterations=2), seed=0)
+                                     TranslatorConfig(iterations=2), seed=0, tl=TL)
 
 
 def test_training_and_diagnostics_raise_no_warnings(tiny):
@@ -168,17 +174,17 @@ def test_training_and_diagnostics_raise_no_warnings(tiny):
     import warnings
 
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", with_actions=True)
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", with_actions=True, tl=TL)
                 for p in layout.PAIRINGS}
-    kin = translation.Kinematics.of_box_push(env)
+    kin = box_push_kinematics(env)
     cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16)
     # a writable copy, as load_random_y gives the stage
     y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in layout.state_columns("Y")]].to_numpy(np.float32).copy()
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
-        tr, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin)
+        tr, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin, tl=TL)
         with torch.no_grad():
-            diag = translation.translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin)
+            diag = translation.translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin, tl=TL)
     assert np.isfinite(diag["labels/real_robot_rmse"])
 
 
@@ -186,15 +192,16 @@ def test_restarts_translate_with_the_mean_of_their_outputs(tiny):
     """restarts = 1 is the single translator unchanged; restarts = 2 trains a second one from seed + 1000 and
     translates with the mean of both normalised outputs; restart r logs under restart<r>/."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=30, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
-    single, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3)
+    single, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3, tl=TL)
     logged = []
     trs, stats = translation.train_restarts(random_x, random_x, y, dyn, cfg.model_copy(update={"restarts": 2}), 3,
-                                            log=lambda m, i: logged.append(set(m)))
-    other, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3 + translation.RESTART_SEED_STRIDE)
+                                            log=lambda m, i: logged.append(set(m)), tl=TL)
+    other, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3 + translation.RESTART_SEED_STRIDE,
+                                            tl=TL)
     x = random_x["R1H"].x[:12]
     for a, b in zip(single.state_dict().values(), trs[0].state_dict().values()):
         assert torch.equal(a, b)
@@ -212,14 +219,14 @@ def test_discriminator_can_see_the_robots_only(tiny):
     """disc_input 'robots': D's input is the robots' columns, so the (copied) object cannot tell it anything; 'state'
     (the paper) sees every column."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
-    n_obj = len(layout.BOX_PUSH.object_cols)
+    n_obj = len(TL.object_cols)
     for disc_input, n_in in (("state", 19), ("robots", 19 - n_obj)):
         tr, _ = translation.train_translator(random_x, random_x, y, dyn,
-                                             cfg.model_copy(update={"disc_input": disc_input}), seed=0)
+                                             cfg.model_copy(update={"disc_input": disc_input}), seed=0, tl=TL)
         assert tr.D[0].in_features == n_in
         yb = torch.randn(5, 19)
         moved = yb.clone()
@@ -232,7 +239,7 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
     """adv_on 'random': D and L_adv see only the translated X random motion (the batch's second half); 'all' (the
     paper) the whole batch."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random") for p in layout.PAIRINGS}
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=3, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
@@ -245,7 +252,8 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
             return orig(self, yb)
 
         monkeypatch.setattr(translation.Translator, "disc", counting_disc)
-        translation.train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0)
+        translation.train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0,
+                                     tl=TL)
         monkeypatch.setattr(translation.Translator, "disc", orig)
         # per iteration: D on real + fakes, then L_adv on the fakes
         assert sizes[:2] == [2 * fakes, fakes]

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfdt import methods, stage
+from lfdt import layout, methods, stage
 
 DEMOS = Path("data/demos")
 RANDOM = Path("data/random")
@@ -22,6 +22,9 @@ TRANSLATORS = Path("models/translator")
 BC_DATA = Path("data/bc_train")
 POLICIES = Path("models/bc")
 VIDEOS = Path("reports/videos")
+
+TASK = layout.BOX_PUSH
+"""The layout of the task the matrix stages serve: the simulated box push of Table I."""
 
 DATA_FILE = {"raw": None, "translated": "translated.parquet", "executed": "executed.parquet"}
 """The BC training file each kind of method (:attr:`lfdt.methods.Method.data`) writes and reads."""

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from lfdt import bc, evaluation, mlflow_runs, stage
-from lfdt.jobs.common import POLICIES, VIDEOS, Config, numeric
+from lfdt.jobs.common import POLICIES, TASK, VIDEOS, Config, numeric
 from lfdt.parallel import Progress
 
 
@@ -18,7 +18,7 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
     p = stage.params(cfg.params)
     ecfg = p.evaluation
     torch.set_num_threads(1)
-    policy, _ = bc.BCPolicy.load(cfg.dir(POLICIES))
+    policy, _ = bc.BCPolicy.load(cfg.dir(POLICIES), TASK)
     tags = {**cfg.tags(), "domain": "Y"}
     with mlflow_runs.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
                             run_name=f"{cfg.name} evaluate") as run:

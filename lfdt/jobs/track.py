@@ -6,7 +6,7 @@ import time
 
 from lfdt import data, layout, methods, mlflow_runs, reexecute, stage, translation
 from lfdt.dynamics import load_models
-from lfdt.jobs.common import BC_DATA, DATA_FILE, DYNAMICS, Config, numeric
+from lfdt.jobs.common import BC_DATA, DATA_FILE, DYNAMICS, TASK, Config, numeric
 from lfdt.parallel import Progress
 
 
@@ -26,7 +26,7 @@ def track_job(cfg: Config, progress: Progress | None = None) -> dict:
             "kind": "executed", "domain": "Y", **cfg.tags(), "track": p.track.model_dump(),
             "source": str(source.dir(BC_DATA) / DATA_FILE["translated"]), "layout": layout.describe(),
             "description": "translated demonstrations re-executed in Y in closed loop; only the executions that "
-                           "solved the task; states and actions as really visited and sent"})
+                           "solved the task; states and actions as really visited and sent"}, TASK)
         data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["executed"])
         metrics = {**cfg.tags(), **stats, "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
         run.metrics(numeric(metrics))

@@ -7,8 +7,10 @@ import time
 import torch
 
 from lfdt import data, layout, mlflow_runs, stage, translation
+from lfdt.config import EnvConfig
 from lfdt.dynamics import load_models, load_random_y
-from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TRANSLATORS, Config, numeric
+from lfdt.envs import arm_specs, replay_check
+from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TASK, TRANSLATORS, Config, numeric
 from lfdt.nets import save_state, torch_device
 from lfdt.parallel import Progress
 
@@ -20,46 +22,47 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     tcfg = translation.method_config(cfg.method, p.translator)
     torch.set_num_threads(tcfg.torch_threads)
     device = torch_device(p.device)
-    kin = translation.Kinematics.of_box_push(p.env)
+    kin = box_push_kinematics(p.env)
     dyn = load_models(DYNAMICS)
     demo_paths = {pr: DEMOS / f"{pr}.parquet" for pr in layout.PAIRINGS}
     episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
-    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], with_actions=True,
+    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=TASK, with_actions=True,
                                                     kind="demos")
                  for pr in layout.PAIRINGS}
     demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
-    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr, kind="random")
+    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr, tl=TASK, kind="random")
                 for pr in layout.PAIRINGS}
-    y_random = load_random_y(RANDOM / "Y.parquet").y
+    y_random = load_random_y(RANDOM / "Y.parquet", TASK).y
     with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device},
                                tags=cfg.tags(), run_name=f"{cfg.name} train_translator") as run:
         trs, all_stats = translation.train_restarts(demos, random_x, y_random, dyn, tcfg, cfg.seed, log=run.metrics,
-                                                    std_floor=p.dynamics.std_floor, progress=progress,
+                                                    std_floor=p.dynamics.std_floor, progress=progress, tl=TASK,
                                                     kinematics=kin, held_out=held, device=device)
         for r, tr in enumerate(trs):
             save_state(tr, cfg.dir(TRANSLATORS) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
                 **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
                 "init_seed": translation.restart_seed(cfg.seed, r),
-                "x_columns": {pr: translation.canonical_x_columns(pr) for pr in layout.PAIRINGS},
-                "y_columns": layout.state_columns("Y"), "episodes": episodes,
+                "x_columns": {pr: translation.canonical_x_columns(pr, TASK) for pr in layout.PAIRINGS},
+                "y_columns": TASK.state_columns("Y"), "episodes": episodes,
                 "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
         df = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
-                                         p.env.timestep * p.env.frame_skip)
+                                         p.env.timestep * p.env.frame_skip, TASK)
         table = translation.translated_table(df, {
             "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
             "source_episodes": episodes, "layout": layout.describe(),
             "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
-                           f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"})
+                           f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
+            TASK)
         data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["translated"])
         with torch.no_grad():
-            replay = translation.replay_check(df, p.env)
+            replay = replay_check(df, p.env)
             # G and D of each restart on their own; restart 0 under the plain names
             diag = {}
             for r, tr in enumerate(trs):
-                d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, kinematics=kin,
-                                                       seed=cfg.seed)
+                d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=TASK,
+                                                       kinematics=kin, seed=cfg.seed)
                 diag.update({translation.restart_key(r, k): v for k, v in d.items()})
-        diag.update(translation.translation_diagnostics(df, demo_paths, episodes))
+        diag.update(translation.translation_diagnostics(df, demo_paths, episodes, TASK))
         stats = all_stats[0]
         curve = stats.pop("curve")
         restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
@@ -72,3 +75,16 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
                    "mlflow_run_id": run.run_id}
         run.metrics(numeric(metrics))
     return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}
+
+
+def box_push_kinematics(env_cfg: EnvConfig) -> translation.Kinematics:
+    """What the translator may take from the box push's domain Y: its two 3-link robots (``translator.kinematics``)."""
+    cols = TASK.state_columns("Y")
+    out = []
+    for arm in arm_specs("Y", env_cfg):
+        n = arm.name
+        out.append(translation.ArmKinematics([cols.index(f"{n}.q{i}") for i in range(arm.n)],
+                                             [cols.index(f"{n}.dq{i}") for i in range(arm.n)],
+                                             [cols.index(f"{n}.ee_x"), cols.index(f"{n}.ee_y")],
+                                             list(arm.cfg.links), list(arm.base)))
+    return translation.Kinematics(out, env_cfg.timestep * env_cfg.frame_skip)

@@ -165,9 +165,9 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     episodes = {pr: sorted(data.read_transitions(path, columns=["episode_index"], kind="demos", domain=pr, task=task)
                            .episode_index.unique().tolist())
                 for pr, path in demo_paths.items()}
-    demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl, kind="demos")
+    demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=tl, kind="demos")
              for pr in layout.PAIRINGS}
-    random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl, kind="random")
+    random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl=tl, kind="random")
                 for pr in layout.PAIRINGS}
     cfg = translation.method_config("lfdt", p.translator)
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
