@@ -13,8 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lfdt.config import EnvConfig
-from lfdt.envs import BoxPushEnv
 from lfdt.seeding import episode_seed
 
 PAPER_TRIALS = 20
@@ -24,21 +22,6 @@ PAPER_TRIALS = 20
 def evaluation_seeds(trials: int, purpose: str = "evaluation") -> list[int]:
     """Reset seeds of the evaluation trials (the same for every config); 'development' gives a disjoint set."""
     return [episode_seed(purpose, 0, "Y", i) for i in range(trials)]
-
-
-def run_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, trials: int, videos: int = 0,
-               video_dir: Path | None = None, video_size: int = 240, progress=None,
-               purpose: str = "evaluation") -> list[dict]:
-    """Run a policy in the box push's Y from the fixed start states; per-trial outcome, first ``videos`` as mp4."""
-    def make_env(record: bool) -> BoxPushEnv:
-        return BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
-                          height=video_size)
-
-    results = rollout_trials(policy, make_env, trials, videos, video_dir, progress, purpose)
-    for r in results:
-        info = r.pop("final_info")
-        r.update({"final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
-    return results
 
 
 def rollout_trials(policy: Callable[[np.ndarray], np.ndarray], make_env: Callable[[bool], object], trials: int,

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from lfdt import bc, evaluation, mlflow_runs, stage
+from lfdt.config import EnvConfig
+from lfdt.envs import BoxPushEnv
 from lfdt.jobs.common import POLICIES, TASK, VIDEOS, Config, numeric
 from lfdt.parallel import Progress
 
@@ -22,8 +26,8 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
     tags = {**cfg.tags(), "domain": "Y"}
     with mlflow_runs.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
                             run_name=f"{cfg.name} evaluate") as run:
-        trials = evaluation.run_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(VIDEOS), ecfg.video_size,
-                                       progress=progress, purpose=ecfg.start_states)
+        trials = box_push_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(VIDEOS), ecfg.video_size,
+                                  progress=progress, purpose=ecfg.start_states)
         ok = np.array([t["success"] for t in trials])
         summary = {**cfg.tags(), "start_states": ecfg.start_states, "successes": int(ok.sum()),
                    "trials": len(trials),
@@ -40,3 +44,18 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
              "success": bool(t["success"]), "steps": t["steps"], "final_box_distance_m": t["final_box_distance_m"],
              "final_yaw_error_rad": t["final_yaw_error_rad"]} for t in trials]
     return {"metrics": summary, "trials": rows}
+
+
+def box_push_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConfig, trials: int, videos: int = 0,
+                    video_dir: Path | None = None, video_size: int = 240, progress=None,
+                    purpose: str = "evaluation") -> list[dict]:
+    """Run a policy in the box push's Y from the fixed start states; per-trial outcome, first ``videos`` as mp4."""
+    def make_env(record: bool) -> BoxPushEnv:
+        return BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
+                          height=video_size)
+
+    results = evaluation.rollout_trials(policy, make_env, trials, videos, video_dir, progress, purpose)
+    for r in results:
+        info = r.pop("final_info")
+        r.update({"final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
+    return results
