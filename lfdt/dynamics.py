@@ -25,6 +25,7 @@ from torch import nn
 
 from lfdt import data, layout
 from lfdt.config import DynamicsConfig
+from lfdt.errors import StageError
 from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, batches, check_finite, mlp
 
@@ -178,6 +179,8 @@ def load_models(path) -> DynamicsModels:
     from lfdt.nets import load_state, read_config
 
     cfg = read_config(path)
-    n_y = len(cfg.get("state_columns") or layout.state_columns("Y"))
-    n_a = len(cfg.get("action_columns") or layout.action_columns("Y"))
-    return load_state(DynamicsModels(n_y, n_a, cfg["dynamics"]["hidden"]), path)
+    missing = [k for k in ("state_columns", "action_columns") if not cfg.get(k)]
+    if missing:  # the sizes come from the saved layout, never from a task assumed here
+        raise StageError(f"{path}: its config names no {' or '.join(missing)}; refit it (`dvc repro fit_dynamics`)")
+    return load_state(DynamicsModels(len(cfg["state_columns"]), len(cfg["action_columns"]), cfg["dynamics"]["hidden"]),
+                      path)

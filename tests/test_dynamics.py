@@ -6,7 +6,8 @@ import torch
 
 from lfdt import data
 from lfdt.config import DynamicsConfig, EnvConfig, RandomConfig
-from lfdt.dynamics import DynamicsModels, fit_dynamics, load_random_y, split_episodes
+from lfdt.dynamics import DynamicsModels, fit_dynamics, load_models, load_random_y, split_episodes
+from lfdt.errors import StageError
 from lfdt.layout import BOX_PUSH
 from lfdt.nets import load_state, save_state
 from lfdt.random_motion import collect_random
@@ -41,3 +42,17 @@ def test_fit_beats_trivial_predictors_and_round_trips(random_y, tmp_path):
     # normalisation statistics travel with the weights
     torch.testing.assert_close(again.y_norm.mean, models.y_norm.mean)
     assert float(again.delta_scale.min()) >= cfg.std_floor
+
+
+def test_load_models_takes_its_sizes_from_the_saved_layout(tmp_path):
+    cfg = DynamicsConfig(hidden=[8])
+    models = DynamicsModels(7, 4, cfg.hidden)  # a twin-like layout: 7 state, 4 action columns
+    cols = {"state_columns": [f"s{i}" for i in range(7)], "action_columns": [f"a{i}" for i in range(4)]}
+    save_state(models, tmp_path / "dyn.pt", {"dynamics": cfg.model_dump(), **cols})
+    again = load_models(tmp_path / "dyn.pt")
+    y = torch.randn(3, 7)
+    torch.testing.assert_close(again.inverse_model(y, y + 0.1), models.inverse_model(y, y + 0.1))
+    # no columns saved: an error naming the file, not a box push assumed
+    save_state(models, tmp_path / "old.pt", {"dynamics": cfg.model_dump()})
+    with pytest.raises(StageError, match=r"old\.pt.*state_columns or action_columns"):
+        load_models(tmp_path / "old.pt")
