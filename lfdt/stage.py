@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import csv
 import json
+import numbers
 import os
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -194,9 +195,10 @@ def progress(total: int | None, desc: str, unit: str = "it") -> tqdm:
                 file=sys.stderr)
 
 
-def numeric(values: Mapping[str, Any]) -> dict[str, int | float]:
-    """The int and float entries of a dict, what MLflow takes as metrics; booleans are flags, not measurements."""
-    return {k: v for k, v in values.items() if isinstance(v, int | float) and not isinstance(v, bool)}
+def numeric(values: Mapping[str, Any]) -> dict[str, float]:
+    """The real-number entries of a dict (Python's or numpy's), what MLflow takes as metrics; booleans are flags, not
+    measurements."""
+    return {k: v for k, v in values.items() if isinstance(v, numbers.Real) and not isinstance(v, bool)}
 
 
 class Frame:

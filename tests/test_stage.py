@@ -113,9 +113,12 @@ def test_the_stage_frame_writes_the_report_with_its_run_id_and_wall_time(tmp_pat
     assert set(run.data.metrics) == {"transitions", "rate", "stage_wall_s"}
 
 
-def test_the_numeric_filter_keeps_ints_and_floats_only():
-    assert stage.numeric({"a": 1, "b": 2.5, "c": True, "d": False, "e": "x", "f": None, "g": {"h": 1}}) == \
-        {"a": 1, "b": 2.5}
+def test_the_numeric_filter_keeps_numbers_but_no_booleans():
+    import numpy as np
+
+    got = stage.numeric({"a": 1, "b": 2.5, "c": True, "d": False, "e": "x", "f": None, "g": {"h": 1},
+                         "i": np.float32(0.5), "j": np.int64(3), "k": np.True_})
+    assert got == {"a": 1, "b": 2.5, "i": 0.5, "j": 3}
 
 
 def test_a_stage_frame_without_a_run_adds_only_the_wall_time(tmp_path):
