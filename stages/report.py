@@ -6,11 +6,11 @@ from pathlib import Path
 
 from lfdt import mlflow_runs, mlflow_views, report, stage
 
-REPORTS = {"expert-reports": "the experts' reports, <pairing>_train.json",
-           "random-reports": "the random motion's reports", "demo-reports": "the demonstrations' reports",
-           "dynamics-report": "the dynamics model's report (a file)", "translator-reports": "the translators' reports",
-           "track-reports": "the re-executions' reports", "bc-reports": "the BC reports",
-           "eval-reports": "the evaluations' reports and trials"}
+INPUTS = {"expert-reports": "the experts' reports, <pairing>_train.json",
+          "random-reports": "the random motion's reports", "demo-reports": "the demonstrations' reports",
+          "dynamics-report": "the dynamics model's report (a file)", "translator-reports": "the translators' reports",
+          "track-reports": "the re-executions' reports", "bc-reports": "the BC reports",
+          "eval-reports": "the evaluations' reports and trials"}
 """The reports of the runs behind Table I; their bookkeeping (runs/) names the runs and their wall times."""
 
 
@@ -24,7 +24,7 @@ def bookkeeping(report_path: Path, pattern: str | None = None) -> list[Path]:
 
 
 def run() -> None:
-    ap = stage.parser(__doc__, {**REPORTS, "out-dir": "where Table I, its plots and the stage times go"})
+    ap = stage.parser(__doc__, {**INPUTS, "out-dir": "where Table I, its plots and the stage times go"})
     args = ap.parse_args()
     p = stage.params(args.params)
     reports = args.out_dir
