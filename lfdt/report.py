@@ -4,6 +4,7 @@ stage wall times. Methods, their titles, colours and the paper's values come fro
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -285,18 +286,14 @@ def translator_diagnostics(translator_dir: Path, track_dir: Path | None = None) 
     return _ordered(pd.DataFrame(rows)).reset_index(drop=True)
 
 
-def stage_times(runs: Path) -> pd.DataFrame:
+def stage_times(bookkeeping: Mapping[str, Iterable[Path]]) -> pd.DataFrame:
     """Wall time of every stage run that produced the current reports, summed per stage, from the stages'
-    bookkeeping files in ``runs/``."""
+    bookkeeping files (``runs/``), given per stage name."""
     rows = []
-    sources = {"train_experts": "experts/*_train.json", "collect_random": "random/*.json",
-               "collect_demos": "demos/*.json", "fit_dynamics": "dynamics.json",
-               "train_translator": "translator/*.json", "track_demos": "track/*.json", "train_bc": "bc/*.json",
-               "evaluate": "eval/*.json"}
-    for name, pattern in sources.items():
+    for name, files in bookkeeping.items():
         walls = []
-        for f in sorted(runs.glob(pattern)):
-            d = json.loads(f.read_text())
+        for f in files:
+            d = json.loads(Path(f).read_text())
             w = d.get("stage_wall_s", d.get("job_wall_s", d.get("wall_time_s")))
             if w is not None:
                 walls.append(float(w))

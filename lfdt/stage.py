@@ -1,17 +1,22 @@
-"""Helpers shared by the thin stage scripts in ``stages/``: params, outputs, progress bars, errors."""
+"""Helpers shared by the thin stage scripts in ``stages/``: arguments, params, the frame every stage runs in
+(:func:`frame`: its MLflow run, progress bars, its report), outputs, errors."""
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import csv
 import json
+import numbers
 import os
 import sys
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from lfdt import mlflow_runs
 from lfdt.config import Params, ParamsError, load_params
 from lfdt.errors import StageError
 from lfdt.files import temp_path
@@ -140,38 +145,43 @@ def wall_since_start() -> float:
     return time.time() - psutil.Process().create_time()
 
 
-def matrix_arguments(description: str, methods) -> tuple[str, int, str, Params]:
-    """``--method`` and ``--demos`` of one matrix instance (its seeds come from ``grid.seeds``) and ``--params``;
-    returns the method, the demonstration count, the params path and the validated params."""
-    import argparse
-
+def parser(description: str, paths: Mapping[str, str] | None = None) -> argparse.ArgumentParser:
+    """A stage's argument parser: ``--params`` and, for each entry of ``paths``, a required ``--<name>`` (a path
+    from dvc.yaml's ``vars``, given on the stage's command line) with its help text."""
     ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--params", default="params.yaml")
+    for name, help_text in (paths or {}).items():
+        ap.add_argument(f"--{name}", required=True, type=Path, metavar="PATH", help=help_text)
+    return ap
+
+
+def matrix_arguments(description: str, methods, paths: Mapping[str, str]) -> tuple[argparse.Namespace, Params]:
+    """The arguments of one matrix instance: ``--method`` and ``--demos`` (its seeds come from ``grid.seeds``),
+    ``--params`` and the stage's ``paths`` (:func:`parser`); returns them and the validated params."""
+    ap = parser(description, paths)
     ap.add_argument("--method", required=True, choices=sorted(methods))
     ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = params(args.params)
     if args.demos > p.demos.per_pairing:
         raise ParamsError(f"--demos {args.demos} is more than demos.per_pairing = {p.demos.per_pairing}")
-    return args.method, args.demos, args.params, p
+    return args, p
 
 
-def group_report(results: list[dict], wall_key: str = "stage_wall_s") -> dict:
-    """The metrics of a matrix instance's jobs, keyed by seed, with the stage's own wall time."""
+def group_report(results: list[dict]) -> dict:
+    """The metrics of a matrix instance's jobs, keyed by seed (:func:`frame` adds the stage's wall time)."""
     first = results[0]["metrics"]
     return {"method": first["method"], "demos": first["demos"],
-            "seeds": {str(r["metrics"]["seed"]): r["metrics"] for r in results}, wall_key: wall_since_start()}
+            "seeds": {str(r["metrics"]["seed"]): r["metrics"] for r in results}}
 
 
-def task_arguments(description: str, tasks) -> tuple[str, Params]:
-    """Parse ``--task`` and ``--params`` of a twin stage; returns the task and the validated params."""
-    import argparse
-
-    ap = argparse.ArgumentParser(description=description)
+def task_arguments(description: str, tasks, paths: Mapping[str, str]) -> tuple[argparse.Namespace, Params]:
+    """The arguments of a twin stage: ``--task``, ``--params`` and the stage's ``paths`` (:func:`parser`); returns
+    them and the validated params."""
+    ap = parser(description, paths)
     ap.add_argument("--task", required=True, choices=tasks)
-    ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
-    return args.task, params(args.params)
+    return args, params(args.params)
 
 
 def config_name(method: str, demos: int, seed: int) -> str:
@@ -183,3 +193,54 @@ def progress(total: int | None, desc: str, unit: str = "it") -> tqdm:
     """A progress bar on stderr."""
     return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, mininterval=1.0, dynamic_ncols=True,
                 file=sys.stderr)
+
+
+def numeric(values: Mapping[str, Any]) -> dict[str, float]:
+    """The real-number entries of a dict (Python's or numpy's), what MLflow takes as metrics; booleans are flags, not
+    measurements."""
+    return {k: v for k, v in values.items() if isinstance(v, numbers.Real) and not isinstance(v, bool)}
+
+
+class Frame:
+    """What a stage's body works with inside :func:`frame`: its MLflow run (None in a stage whose jobs open their
+    own), its progress bars and the report it fills in."""
+
+    def __init__(self, run: mlflow_runs.Tracker | None, bars: contextlib.ExitStack):
+        self.run = run
+        self.report: dict[str, Any] = {}
+        """Written to the frame's report path when the body succeeds."""
+        self._bars = bars
+
+    def progress(self, total: int | None, desc: str, unit: str = "it") -> tqdm:
+        """A progress bar on stderr (:func:`progress`), closed at the latest when the frame ends."""
+        return self._bars.enter_context(progress(total, desc, unit))
+
+    def metrics(self, values: Mapping[str, Any], step: int | None = None) -> None:
+        """Log the numeric entries of ``values`` (:func:`numeric`) to the stage's run."""
+        if self.run is None:
+            raise StageError("this stage opened no MLflow run: its jobs log their own metrics")
+        self.run.metrics(numeric(values), step)
+
+
+@contextlib.contextmanager
+def frame(report_path: str | Path | None, stage: str | None = None, run_params: Mapping[str, Any] | None = None, *,
+          tags: Mapping[str, Any] | None = None, run_name: str | None = None) -> Iterator[Frame]:
+    """The frame every stage runs in. With ``stage`` it opens the stage's MLflow run
+    (:func:`lfdt.mlflow_runs.stage_run` with ``run_params``, ``tags`` and ``run_name``); matrix stages, whose jobs
+    open their own runs, give none. When the body succeeds, :attr:`Frame.report` goes to ``report_path``
+    (:func:`write_report`) with ``stage_wall_s`` (also logged to the run) and the run's ``mlflow_run_id``; when it
+    raises, nothing is written and the run is marked FAILED. ``report_path`` None: the stage writes no report."""
+    with contextlib.ExitStack() as stack:
+        run = None
+        if stage is not None:
+            run = stack.enter_context(mlflow_runs.stage_run(stage, run_params or {}, tags=tags, run_name=run_name))
+        with contextlib.ExitStack() as bars:
+            f = Frame(run, bars)
+            yield f
+        wall = wall_since_start()
+        extra: dict[str, Any] = {"stage_wall_s": wall}
+        if run is not None:
+            run.metrics({"stage_wall_s": wall})
+            extra["mlflow_run_id"] = run.run_id
+        if report_path is not None:
+            write_report(report_path, {**f.report, **extra})

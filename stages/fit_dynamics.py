@@ -1,26 +1,24 @@
 """DVC stage: fit the forward model F and the inverse model F^-1 on domain Y's random-motion data."""
 
-import argparse
-from pathlib import Path
-
-from lfdt import dynamics, layout, mlflow_runs, stage
+from lfdt import dynamics, layout, stage
 from lfdt.nets import save_state, torch_device
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--params", default="params.yaml")
+    ap = stage.parser(__doc__, {"random-dir": "the random motion, Y.parquet", "out-dir": "where dynamics.pt goes",
+                                "report": "the report (a JSON file under reports/)",
+                                "curve": "the learning curve (CSV)"})
     args = ap.parse_args()
     p = stage.params(args.params)
     cfg, device = p.dynamics, torch_device(p.device)
-    d = dynamics.load_random_y("data/random/Y.parquet", layout.BOX_PUSH)
-    with mlflow_runs.stage_run("fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
-                               tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as run:
-        with stage.progress(cfg.iterations, "F and F^-1", "it") as bar:
-            models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: run.metrics(m, i), progress=bar,
+    d = dynamics.load_random_y(str(args.random_dir / "Y.parquet"), layout.BOX_PUSH)
+    with stage.frame(args.report, "fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
+                     tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as f:
+        with f.progress(cfg.iterations, "F and F^-1", "it") as bar:
+            models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: f.metrics(m, i), progress=bar,
                                                 device=device)
         curve = res.pop("curve")
-        save_state(models, Path("models/dynamics/dynamics.pt"), {
+        save_state(models, args.out_dir / "dynamics.pt", {
             "dynamics": cfg.model_dump(), "state_columns": layout.state_columns("Y"),
             "action_columns": layout.action_columns("Y"), "y_norm": models.y_norm.to_dict(),
             "delta_scale": models.delta_scale.tolist(),
@@ -28,17 +26,15 @@ def run() -> None:
         groups = {"arms": [c for c in layout.state_columns("Y") if not c.startswith("box.")],
                   "box": list(layout.OBJECT_COLUMNS)}
         for name, cols in groups.items():
-            f = sum(res["forward_mse_per_column"][c] for c in cols)
-            t = sum(res["forward_trivial_mse_per_column"][c] for c in cols)
-            res[f"forward_ratio_{name}"] = f / t
+            f_mse = sum(res["forward_mse_per_column"][c] for c in cols)
+            t_mse = sum(res["forward_trivial_mse_per_column"][c] for c in cols)
+            res[f"forward_ratio_{name}"] = f_mse / t_mse
         metrics = {k: v for k, v in res.items() if not isinstance(v, dict)}
-        metrics["stage_wall_s"] = stage.wall_since_start()
-        metrics["mlflow_run_id"] = run.run_id
-        stage.write_report("reports/dynamics.json", {**metrics, "per_column": {
+        f.report.update({**metrics, "per_column": {
             "forward_mse": res["forward_mse_per_column"], "forward_trivial_mse": res["forward_trivial_mse_per_column"],
             "inverse_mse": res["inverse_mse_per_column"]}})
-        stage.write_csv("reports/dynamics_curve.csv", curve)
-        run.metrics({k: v for k, v in metrics.items() if isinstance(v, int | float)})
+        stage.write_csv(args.curve, curve)
+        f.metrics(metrics)
     print(f"F: held-out MSE {res['forward_mse']:.4g} = {res['forward_ratio']:.3f} x trivial (bar 0.2); "
           f"F^-1: {res['inverse_mse']:.4g} = {res['inverse_ratio']:.3f} x mean action (bar 0.5)")
 

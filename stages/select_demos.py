@@ -1,7 +1,5 @@
 """DVC stage: the raw demonstration subsets of one demo count, every seed, for BC without translation."""
 
-import argparse
-
 import pyarrow.parquet as pq
 
 from lfdt import data, layout, stage
@@ -9,19 +7,19 @@ from lfdt.jobs import common
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = stage.parser(__doc__, {"demos-dir": "the demonstrations, <pairing>.parquet",
+                                "bc-data": "where the subsets go, a folder per configuration"})
     ap.add_argument("--demos", required=True, type=int)
-    ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = stage.params(args.params)
-    for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, args.params):
+    for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data):
         for pairing in layout.PAIRINGS:
-            path = common.DEMOS / f"{pairing}.parquet"
+            path = args.demos_dir / f"{pairing}.parquet"
             episodes = data.demo_subset(path, args.demos, cfg.seed, pairing)
             table = pq.read_table(path)
             keep = data.read_transitions(path, columns=["episode_index"], kind="demos",
                                          domain=pairing).episode_index.isin(episodes).to_numpy()
-            data.write_table(table.filter(keep), cfg.dir(common.BC_DATA) / f"raw_{pairing}.parquet")
+            data.write_table(table.filter(keep), cfg.dir(cfg.bc_data_dir) / f"raw_{pairing}.parquet")
 
 
 if __name__ == "__main__":

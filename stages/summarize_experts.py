@@ -1,22 +1,21 @@
 """DVC stage: reports/experts.json, one entry per pairing (expert evaluation + demonstration statistics), and the
 protocol's premise measured: both robots replaying their programs together in Y, nobody adapting."""
 
-import argparse
-
 from lfdt import layout, programmed, stage
 
 PREMISE_EPISODES = 200
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--params", default="params.yaml")
+    ap = stage.parser(__doc__, {"expert-reports": "the experts' reports, <pairing>_train.json",
+                                "demo-reports": "the demonstrations' reports, <pairing>.json",
+                                "out": "the summary (a JSON file under reports/)"})
     args = ap.parse_args()
     p = stage.params(args.params)
     out: dict = {"protocol": p.demos.protocol}
     for pairing in layout.PAIRINGS:
-        train = stage.read_report(f"reports/experts/{pairing}_train.json")
-        demos = stage.read_report(f"reports/demos/{pairing}.json")
+        train = stage.read_report(args.expert_reports / f"{pairing}_train.json")
+        demos = stage.read_report(args.demo_reports / f"{pairing}.json")
         out[pairing] = {
             "success_rate": train["success_rate"],
             "episodes": train["episodes"],
@@ -33,7 +32,7 @@ def run() -> None:
         "success_rate": programmed.programs_together_success(p.env, p.demos.program, PREMISE_EPISODES),
         "episodes": PREMISE_EPISODES,
         "description": "both robots replay takes of their own programs together in Y, nobody adapting"}
-    stage.write_report("reports/experts.json", out)
+    stage.write_report(args.out, out)
     print(f"two programmed robots together in Y: {out['programs_together_in_Y']['success_rate']:.2f} success over "
           f"{PREMISE_EPISODES} start states")
 

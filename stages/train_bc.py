@@ -1,6 +1,4 @@
-"""DVC stage: behaviour cloning of one (method, demos), every seed side by side, from data/bc_train/."""
-
-from pathlib import Path
+"""DVC stage: behaviour cloning of one (method, demos), every seed side by side, from the BC training sets."""
 
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
@@ -9,15 +7,20 @@ from lfdt.nets import torch_device
 
 
 def run() -> None:
-    method, demos, params_path, p = stage.matrix_arguments(__doc__, methods.METHODS)
+    args, p = stage.matrix_arguments(__doc__, methods.METHODS, {
+        "bc-data": "the BC training sets, a folder per configuration",
+        "policies": "where the policies go, a folder per configuration",
+        "reports": "where the report <method>-d<demos>.json and its learning curve go"})
     torch_device(p.device)  # before any job starts
-    cfgs = common.configs(method, demos, p.grid.seeds, params_path)
-    members = 2 if methods.get(method).data == "raw" else 1
-    results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
-                                desc=f"BC {cfgs[0].group}")
-    out = Path("reports/bc")
-    stage.write_report(out / f"{cfgs[0].group}.json", stage.group_report(results))
-    stage.write_csv(out / f"{cfgs[0].group}_curve.csv", [c for r in results for c in r["curve"]])
+    cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data,
+                          policies_dir=args.policies)
+    group = cfgs[0].group
+    members = 2 if methods.get(args.method).data == "raw" else 1
+    with stage.frame(args.reports / f"{group}.json") as f:
+        results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
+                                    desc=f"BC {group}")
+        f.report.update(stage.group_report(results))
+        stage.write_csv(args.reports / f"{group}_curve.csv", [c for r in results for c in r["curve"]])
 
 
 if __name__ == "__main__":

@@ -1,19 +1,19 @@
 """DVC stage: train the SAC experts of both pairings side by side (each resumable), evaluate them on fresh seeds."""
 
-import argparse
-
 from lfdt import layout, parallel, stage
-from lfdt.jobs.experts import expert_job
+from lfdt.jobs.experts import ExpertJob, expert_job
 from lfdt.nets import torch_device
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--params", default="params.yaml")
+    ap = stage.parser(__doc__, {"experts": "where the experts go, a folder per pairing",
+                                "checkpoints": "resumable training checkpoints, a folder per pairing",
+                                "reports": "where the reports <pairing>_train.json and learning curves go"})
     args = ap.parse_args()
     p = stage.params(args.params)
     torch_device(p.device)  # before any job starts
-    results = parallel.run_jobs(expert_job, [(pr, args.params) for pr in layout.PAIRINGS], p.grid.workers,
+    jobs = [ExpertJob(pr, args.params, args.experts, args.checkpoints, args.reports) for pr in layout.PAIRINGS]
+    results = parallel.run_jobs(expert_job, jobs, p.grid.workers,
                                 total=p.experts.total_timesteps * len(layout.PAIRINGS), desc="SAC experts",
                                 unit="step")
     for r in results:

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from lfdt import mlflow_runs, stage, tasks, twin
+from lfdt import stage, tasks, twin
 from lfdt.robot import deploy_log
 from lfdt.twin import pipeline as twin_pipeline
 
@@ -21,26 +21,26 @@ def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
 
 
 def run() -> None:
-    task, all_params = stage.task_arguments(__doc__, tasks.NAMES)
-    p = all_params.twin
-    video_root = Path("reports/twin/videos") / task
+    args, all_params = stage.task_arguments(__doc__, tasks.NAMES, {
+        "models": "the models, a folder per task", "videos": "where the videos go, a folder per task",
+        "reports": "where the report <task>_eval.json goes"})
+    task, p = args.task, all_params.twin
+    video_root = args.videos / task
     video_root.mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos or the real robots' logs
-    with mlflow_runs.stage_run("twin_evaluate", {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
-                            tags={"task": task, "backend": p.backend},
-                            run_name=f"{task} twin_evaluate") as run:
+    with stage.frame(args.reports / f"{task}_eval.json", "twin_evaluate",
+                     {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
+                     tags={"task": task, "backend": p.backend}, run_name=f"{task} twin_evaluate") as f:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
-            rows = twin_pipeline.evaluate(task, p, Path("models/twin") / task, video_root=video_root)
+            rows = twin_pipeline.evaluate(task, p, args.models / task, video_root=video_root)
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}
         counts = {m: sum(r["method"] == m for r in rows) for m in twin.METHODS}
-        run.metrics({f"{m}/successes": v for m, v in summary.items()})
-        run.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
-        stage.write_report(Path("reports/twin") / f"{task}_eval.json",
-                           {"task": task, "backend": p.backend, "trials": counts, "successes": summary,
-                            "per_trial": rows, "stage_wall_s": stage.wall_since_start(), "mlflow_run_id": run.run_id})
+        f.metrics({f"{m}/successes": v for m, v in summary.items()})
+        f.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
+        f.report.update({"task": task, "backend": p.backend, "trials": counts, "successes": summary,
+                         "per_trial": rows})
     print(f"{task}: " + ", ".join(f"{m} {v}/{counts[m]}" for m, v in summary.items()))
-
 
 if __name__ == "__main__":
     stage.main(run)

@@ -1,8 +1,6 @@
 """DVC stage: reports/twin_runs.csv and reports/twin.md, our results beside the paper's real-robot numbers."""
 
-import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -21,8 +19,8 @@ def interval(trials: list[dict]) -> tuple[float, float]:
 
 
 def run() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--params", default="params.yaml")
+    ap = stage.parser(__doc__, {"twin-reports": "the twin stages' reports, <task>_<data|train|eval>.json",
+                                "out-dir": "where twin_runs.csv and twin.md go"})
     args = ap.parse_args()
     p = stage.params(args.params).twin
     rows, lines = [], []
@@ -31,7 +29,7 @@ def run() -> None:
               "| task | method | ours | successes | per seed | 95 % interval | paper (real robots) |",
               "| --- | --- | --- | --- | --- | --- | --- |"]
     for task in p.tasks:
-        ev = json.loads(Path(f"reports/twin/{task}_eval.json").read_text())
+        ev = json.loads((args.twin_reports / f"{task}_eval.json").read_text())
         rows += [{k: r[k] for k in ("task", "method", "seed", "trial", "success")} for r in ev["per_trial"]]
         for method in twin.METHODS:
             trials = [r for r in ev["per_trial"] if r["method"] == method]
@@ -48,16 +46,18 @@ def run() -> None:
               f"from the same start states; seeds {', '.join(map(str, p.seeds))} (each its own data, dynamics, "
               "translator and BC; 'per seed' in %). The interval counts both the seeds and the start states as "
               "random. Paper: Kobayashi et al. 2023, §IV-E (10 trials on the real robots)."]
-    stage.write_csv("reports/twin_runs.csv", rows)
-    Path("reports/twin.md").write_text("\n".join(lines) + "\n")
+    runs_csv, md = args.out_dir / "twin_runs.csv", args.out_dir / "twin.md"
+    stage.write_csv(runs_csv, rows)
+    md.write_text("\n".join(lines) + "\n")
     # one parent run for the twin: it carries the report and adopts the runs behind it
     children = [i for task in p.tasks for kind in ("data", "train", "eval")
-                for i in stage.run_ids(stage.read_report(f"reports/twin/{task}_{kind}.json"))]
+                for i in stage.run_ids(stage.read_report(args.twin_reports / f"{task}_{kind}.json"))]
     params = {"twin": {"seeds": p.seeds, "trials": p.trials, "backend": p.backend}}
-    with mlflow_runs.stage_run("twin_report", params, tags={"pipeline_parent": "true"},
-                               run_name=mlflow_runs.pipeline_run_name("twin")) as parent:
-        parent.artifact(Path("reports/twin.md"))
-        parent.artifact(Path("reports/twin_runs.csv"))
+    with stage.frame(None, "twin_report", params, tags={"pipeline_parent": "true"},
+                     run_name=mlflow_runs.pipeline_run_name("twin")) as f:
+        parent = f.run
+        parent.artifact(md)
+        parent.artifact(runs_csv)
         mlflow_runs.adopt_children(parent.run_id, children)
         parent.dict({"runs": list(dict.fromkeys(children))}, "children.json")  # kept when a newer parent adopts them
     mlflow_views.install()  # the twin's view shows this parent's runs (the report stage may have run before it)

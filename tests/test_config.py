@@ -97,7 +97,8 @@ def test_stage_stops_before_compute_with_named_key(tmp_path):
     params = tmp_path / "params.yaml"
     params.write_text("random:\n  transitions: -3\n")
     proc = subprocess.run([sys.executable, str(ROOT / "stages/collect_random.py"), "--domain", "Y",
-                           "--params", str(params)], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+                           "--params", str(params), "--out-dir", "data/random", "--reports", "reports/random"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "random.transitions = -3" in proc.stderr
     assert not (tmp_path / "data").exists() and not (tmp_path / "mlflow.db").exists()

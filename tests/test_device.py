@@ -56,11 +56,17 @@ def test_a_cuda_index_beyond_the_machine_is_a_clear_error(monkeypatch):
 
 
 @pytest.mark.parametrize("args", [
-    ["stages/train_experts.py"],
-    ["stages/fit_dynamics.py"],
-    ["stages/train_translator.py", "--method", "lfdt", "--demos", "50"],
-    ["stages/train_bc.py", "--method", "lfdt", "--demos", "50"],
-    ["stages/twin_train.py", "--task", "block_push"],
+    ["stages/train_experts.py", "--experts", "models/experts", "--checkpoints", "checkpoints/experts",
+     "--reports", "reports/experts"],
+    ["stages/fit_dynamics.py", "--random-dir", "data/random", "--out-dir", "models/dynamics", "--report",
+     "reports/dynamics.json", "--curve", "reports/dynamics_curve.csv"],
+    ["stages/train_translator.py", "--method", "lfdt", "--demos", "50", "--demos-dir", "data/demos", "--random-dir",
+     "data/random", "--dynamics-dir", "models/dynamics", "--translators", "models/translator", "--bc-data",
+     "data/bc_train", "--reports", "reports/translator"],
+    ["stages/train_bc.py", "--method", "lfdt", "--demos", "50", "--bc-data", "data/bc_train", "--policies",
+     "models/bc", "--reports", "reports/bc"],
+    ["stages/twin_train.py", "--task", "block_push", "--data-dir", "data/twin", "--models", "models/twin",
+     "--reports", "reports/twin"],
 ])
 def test_every_training_stage_stops_on_a_missing_device_before_any_work(tmp_path, args):
     params = tmp_path / "params.yaml"

@@ -83,7 +83,8 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
     params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
               "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]}}
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
-    cmd = [sys.executable, str(ROOT / "stages/train_experts.py")]  # both pairings, side by side
+    cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--experts", "models/experts",  # both pairings
+           "--checkpoints", "checkpoints/experts", "--reports", "reports/experts"]
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path / 'mlflow.db'}"}
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)

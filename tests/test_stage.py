@@ -1,6 +1,7 @@
 """The helpers every stage script shares."""
 
 import csv
+from pathlib import Path
 
 from lfdt import stage
 
@@ -84,3 +85,83 @@ def test_the_bookkeeping_of_a_report_lies_under_the_last_reports_folder():
     assert stage.runs_path("reports/bc/lfdt-d50.json") == Path("runs/bc/lfdt-d50.json")
     assert stage.runs_path("/tmp/reports/x/reports/y.json") == Path("/tmp/reports/x/runs/y.json")
     assert stage.runs_path("reports/reports.json") == Path("runs/reports.json")
+
+
+def test_the_stage_frame_writes_the_report_with_its_run_id_and_wall_time(tmp_path, monkeypatch):
+    import json
+
+    import mlflow
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    path = tmp_path / "reports" / "random" / "Y.json"
+    path.parent.mkdir(parents=True)
+    with stage.frame(path, "unit", {"a": 1}, tags={"domain": "Y"}, run_name="Y unit") as f:
+        with f.progress(3, "unit") as bar:
+            bar.update(3)
+        f.metrics({"transitions": 3, "rate": 0.5, "ok": True, "domain": "Y"})
+        f.report.update({"domain": "Y", "transitions": 3, "ok": True})
+        run_id = f.run.run_id
+    assert json.loads(path.read_text()) == {"domain": "Y", "transitions": 3, "ok": True}
+    books = json.loads((tmp_path / "runs" / "random" / "Y.json").read_text())
+    assert list(books) == ["stage_wall_s", "mlflow_run_id"]  # the order every stage wrote them in before
+    assert books["mlflow_run_id"] == run_id and books["stage_wall_s"] > 0
+    run = mlflow.MlflowClient(uri).get_run(run_id)
+    assert run.info.status == "FINISHED" and run.info.run_name == "Y unit"
+    assert run.data.tags["lfdt.stage"] == "unit" and run.data.params == {"a": "1"}
+    # booleans are flags, not measurements; strings are no metrics
+    assert set(run.data.metrics) == {"transitions", "rate", "stage_wall_s"}
+
+
+def test_the_numeric_filter_keeps_numbers_but_no_booleans():
+    import numpy as np
+
+    got = stage.numeric({"a": 1, "b": 2.5, "c": True, "d": False, "e": "x", "f": None, "g": {"h": 1},
+                         "i": np.float32(0.5), "j": np.int64(3), "k": np.True_})
+    assert got == {"a": 1, "b": 2.5, "i": 0.5, "j": 3}
+
+
+def test_a_stage_frame_without_a_run_adds_only_the_wall_time(tmp_path):
+    import json
+
+    import pytest
+
+    from lfdt.errors import StageError
+
+    path = tmp_path / "reports" / "bc" / "lfdt-d3.json"
+    path.parent.mkdir(parents=True)
+    with stage.frame(path) as f:  # a matrix stage: its jobs open their own runs
+        f.report.update({"method": "lfdt", "demos": 3, "seeds": {"0": {"success_rate": 0.5, "mlflow_run_id": "a"}}})
+        assert f.run is None
+        with pytest.raises(StageError, match="opened no MLflow run"):
+            f.metrics({"x": 1.0})
+    assert json.loads(path.read_text()) == {"method": "lfdt", "demos": 3, "seeds": {"0": {"success_rate": 0.5}}}
+    books = json.loads((tmp_path / "runs" / "bc" / "lfdt-d3.json").read_text())
+    assert list(books) == ["seeds", "stage_wall_s"] and books["seeds"] == {"0": {"mlflow_run_id": "a"}}
+
+
+def test_an_error_inside_the_stage_frame_writes_no_report_and_fails_the_run(tmp_path, monkeypatch):
+    import mlflow
+    import pytest
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    path = tmp_path / "reports" / "x.json"
+    path.parent.mkdir(parents=True)
+    with pytest.raises(RuntimeError, match="diverged"), stage.frame(path, "unit", {}) as f:
+        f.report["a"] = 1
+        run_id = f.run.run_id
+        raise RuntimeError("diverged")
+    assert not path.exists() and not (tmp_path / "runs").exists()
+    assert mlflow.MlflowClient(uri).get_run(run_id).info.status == "FAILED"
+
+
+def test_a_stage_refuses_a_missing_path_argument(monkeypatch, capsys):
+    import pytest
+
+    ap = stage.parser("unit", {"out-dir": "where it goes"})
+    with pytest.raises(SystemExit) as err:
+        ap.parse_args([])
+    assert err.value.code == 2
+    assert "the following arguments are required: --out-dir" in capsys.readouterr().err
+    assert ap.parse_args(["--out-dir", "data/random"]).out_dir == Path("data/random")

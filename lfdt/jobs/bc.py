@@ -7,7 +7,7 @@ import time
 import torch
 
 from lfdt import bc, data, layout, methods, mlflow_runs, stage
-from lfdt.jobs.common import BC_DATA, DATA_FILE, POLICIES, TASK, Config, numeric
+from lfdt.jobs.common import DATA_FILE, TASK, Config, numeric
 from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 
@@ -15,7 +15,7 @@ from lfdt.parallel import Progress
 def bc_tasks(cfg: Config) -> list[bc.BCTask]:
     """What the members of a method's policy learn from."""
     m = methods.get(cfg.method)
-    src = cfg.dir(BC_DATA)
+    src = cfg.dir(cfg.bc_data_dir)
     if m.data == "raw":
         return bc.tasks_for(cfg.method, raw_demos={pr: data.read_transitions(src / f"raw_{pr}.parquet", kind="demos",
                                                                              domain=pr) for pr in layout.PAIRINGS},
@@ -42,7 +42,7 @@ def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
                 curves.append({"seed": cfg.seed, "member": task.name,
                                **{k.split("/")[-1]: v for k, v in c.items()}})
             metrics.update({f"{task.name}/{k}": v for k, v in st.items()})
-        bc.BCPolicy(members, TASK).save(cfg.dir(POLICIES), {**cfg.tags(), "bc": bcfg.model_dump(),
+        bc.BCPolicy(members, TASK).save(cfg.dir(cfg.policies_dir), {**cfg.tags(), "bc": bcfg.model_dump(),
                                                       "members": [t.name for t in tasks]})
         metrics.update({**cfg.tags(), "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id})
         run.metrics(numeric(metrics))

@@ -3,7 +3,8 @@
 A matrix stage (``stages/train_translator.py``, ``track_demos``, ``train_bc``, ``evaluate``) covers one method
 and one demonstration count; its seeds are independent jobs that :func:`lfdt.parallel.run_jobs` runs side by
 side. Each job opens its own MLflow run, writes its own files under ``<root>/<method>-d<demos>/s<seed>/`` and
-returns its metrics; the stage gathers them into one report per (method, demos). Each kind of job lives in its
+returns its metrics; the stage gathers them into one report per (method, demos). The roots are dvc.yaml's paths: the
+stage gets them on its command line and hands them to its jobs in their :class:`Config`. Each kind of job lives in its
 own module of this package, importing only what it needs, so that a change to one stage's code reruns only
 that stage.
 """
@@ -15,13 +16,8 @@ from pathlib import Path
 
 from lfdt import layout, methods, stage
 
-DEMOS = Path("data/demos")
-RANDOM = Path("data/random")
-DYNAMICS = Path("models/dynamics/dynamics.pt")
-TRANSLATORS = Path("models/translator")
-BC_DATA = Path("data/bc_train")
-POLICIES = Path("models/bc")
-VIDEOS = Path("reports/videos")
+DYNAMICS_FILE = "dynamics.pt"
+"""F and F^-1 in the dynamics folder (``stages/fit_dynamics.py`` writes it)."""
 
 TASK = layout.BOX_PUSH
 """The layout of the task the matrix stages serve: the simulated box push of Table I."""
@@ -32,12 +28,27 @@ DATA_FILE = {"raw": None, "translated": "translated.parquet", "executed": "execu
 
 @dataclass(frozen=True)
 class Config:
-    """One configuration of a matrix stage."""
+    """One configuration of a matrix stage, with the folders its job reads and writes (a stage sets those its jobs
+    use, from its command line)."""
 
     method: str
     demos: int
     seed: int
     params: str = "params.yaml"
+    demos_dir: Path | None = None
+    """The demonstrations of each pairing, ``<pairing>.parquet``."""
+    random_dir: Path | None = None
+    """The random motion of each domain, ``<domain>.parquet``."""
+    dynamics_dir: Path | None = None
+    """F and F^-1 (:data:`DYNAMICS_FILE`)."""
+    translators_dir: Path | None = None
+    """The translators, one folder per configuration."""
+    bc_data_dir: Path | None = None
+    """The BC training sets, one folder per configuration."""
+    policies_dir: Path | None = None
+    """The BC policies, one folder per configuration."""
+    videos_dir: Path | None = None
+    """The evaluation videos, one folder per configuration."""
 
     @property
     def group(self) -> str:
@@ -57,10 +68,10 @@ class Config:
         return {"method": self.method, "demos": self.demos, "seed": self.seed, "config": self.name}
 
 
-def configs(method: str, demos: int, seeds: list[int], params: str) -> list[Config]:
-    """The jobs of one matrix stage instance."""
+def configs(method: str, demos: int, seeds: list[int], params: str, **dirs: Path) -> list[Config]:
+    """The jobs of one matrix stage instance; ``dirs`` are :class:`Config`'s folders its jobs use."""
     methods.get(method)
-    return [Config(method, demos, s, params) for s in seeds]
+    return [Config(method, demos, s, params, **dirs) for s in seeds]
 
 
 IDENTIFIERS = frozenset({"demos", "seed"})
@@ -69,5 +80,4 @@ IDENTIFIERS = frozenset({"demos", "seed"})
 
 def numeric(d: dict) -> dict:
     """The int and float entries of a metrics dict (what MLflow takes as metrics), identifiers left out."""
-    return {k: v for k, v in d.items()
-            if isinstance(v, int | float) and not isinstance(v, bool) and k not in IDENTIFIERS}
+    return {k: v for k, v in stage.numeric(d).items() if k not in IDENTIFIERS}

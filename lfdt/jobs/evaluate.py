@@ -12,7 +12,7 @@ import torch
 from lfdt import bc, evaluation, mlflow_runs, stage
 from lfdt.config import EnvConfig
 from lfdt.envs import BoxPushEnv
-from lfdt.jobs.common import POLICIES, TASK, VIDEOS, Config, numeric
+from lfdt.jobs.common import TASK, Config, numeric
 from lfdt.parallel import Progress
 
 
@@ -22,12 +22,12 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
     p = stage.params(cfg.params)
     ecfg = p.evaluation
     torch.set_num_threads(1)
-    policy, _ = bc.BCPolicy.load(cfg.dir(POLICIES), TASK)
+    policy, _ = bc.BCPolicy.load(cfg.dir(cfg.policies_dir), TASK)
     tags = {**cfg.tags(), "domain": "Y"}
     with mlflow_runs.stage_run("evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags=tags,
                             run_name=f"{cfg.name} evaluate") as run:
-        trials = box_push_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(VIDEOS), ecfg.video_size,
-                                  progress=progress, purpose=ecfg.start_states)
+        trials = box_push_trials(policy, p.env, ecfg.trials, ecfg.videos, cfg.dir(cfg.videos_dir), ecfg.video_size,
+                                 progress=progress, purpose=ecfg.start_states)
         ok = np.array([t["success"] for t in trials])
         summary = {**cfg.tags(), "start_states": ecfg.start_states, "successes": int(ok.sum()),
                    "trials": len(trials),
@@ -38,7 +38,7 @@ def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
                    "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
         run.metrics(numeric(summary))
         if ecfg.videos:
-            run.artifact(cfg.dir(VIDEOS), "videos")
+            run.artifact(cfg.dir(cfg.videos_dir), "videos")
     rows = [{"method": cfg.method, "demos": cfg.demos, "seed": cfg.seed, "start_states": ecfg.start_states,
              "trial": t["trial"], "start_seed": t["seed"],
              "success": bool(t["success"]), "steps": t["steps"], "final_box_distance_m": t["final_box_distance_m"],

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from lfdt import data, layout, methods, mlflow_runs, reexecute, stage, translation
 from lfdt.dynamics import load_models
-from lfdt.jobs.common import BC_DATA, DATA_FILE, DYNAMICS, TASK, Config, numeric
+from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.parallel import Progress
 
 
@@ -15,19 +16,19 @@ def track_job(cfg: Config, progress: Progress | None = None) -> dict:
     t0 = time.perf_counter()
     p = stage.params(cfg.params)
     m = methods.get(cfg.method)
-    source = Config(m.translator, cfg.demos, cfg.seed, cfg.params)
-    df = data.read_transitions(source.dir(BC_DATA) / DATA_FILE["translated"], kind="translated", domain="Y")
-    dyn = load_models(DYNAMICS) if p.track.controller == "inverse" else None
+    source = dataclasses.replace(cfg, method=m.translator)
+    df = data.read_transitions(source.dir(cfg.bc_data_dir) / DATA_FILE["translated"], kind="translated", domain="Y")
+    dyn = load_models(cfg.dynamics_dir / DYNAMICS_FILE) if p.track.controller == "inverse" else None
     with mlflow_runs.stage_run("track_demos", {"track": p.track.model_dump(), **cfg.tags()}, tags=cfg.tags(),
                             run_name=f"{cfg.name} track_demos") as run:
         out, stats = reexecute.execute(df, p.env, p.track, dyn,
                                        progress=(lambda: progress.update(1)) if progress is not None else None)
         table = translation.translated_table(out, {
             "kind": "executed", "domain": "Y", **cfg.tags(), "track": p.track.model_dump(),
-            "source": str(source.dir(BC_DATA) / DATA_FILE["translated"]), "layout": layout.describe(),
+            "source": str(source.dir(cfg.bc_data_dir) / DATA_FILE["translated"]), "layout": layout.describe(),
             "description": "translated demonstrations re-executed in Y in closed loop; only the executions that "
                            "solved the task; states and actions as really visited and sent"}, TASK)
-        data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["executed"])
+        data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["executed"])
         metrics = {**cfg.tags(), **stats, "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id}
         run.metrics(numeric(metrics))
     return {"metrics": metrics}

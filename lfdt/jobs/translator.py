@@ -10,7 +10,7 @@ from lfdt import data, layout, mlflow_runs, stage, translation
 from lfdt.config import EnvConfig
 from lfdt.dynamics import load_models, load_random_y
 from lfdt.envs import arm_specs, replay_check
-from lfdt.jobs.common import BC_DATA, DATA_FILE, DEMOS, DYNAMICS, RANDOM, TASK, TRANSLATORS, Config, numeric
+from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.nets import save_state, torch_device
 from lfdt.parallel import Progress
 
@@ -23,23 +23,23 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
     torch.set_num_threads(tcfg.torch_threads)
     device = torch_device(p.device)
     kin = box_push_kinematics(p.env)
-    dyn = load_models(DYNAMICS)
-    demo_paths = {pr: DEMOS / f"{pr}.parquet" for pr in layout.PAIRINGS}
+    dyn = load_models(cfg.dynamics_dir / DYNAMICS_FILE)
+    demo_paths = {pr: cfg.demos_dir / f"{pr}.parquet" for pr in layout.PAIRINGS}
     episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
     demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=TASK, with_actions=True,
                                                     kind="demos")
                  for pr in layout.PAIRINGS}
     demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
-    random_x = {pr: translation.load_x_transitions(RANDOM / f"{pr}.parquet", pr, tl=TASK, kind="random")
+    random_x = {pr: translation.load_x_transitions(cfg.random_dir / f"{pr}.parquet", pr, tl=TASK, kind="random")
                 for pr in layout.PAIRINGS}
-    y_random = load_random_y(RANDOM / "Y.parquet", TASK).y
+    y_random = load_random_y(cfg.random_dir / "Y.parquet", TASK).y
     with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device},
                                tags=cfg.tags(), run_name=f"{cfg.name} train_translator") as run:
         trs, all_stats = translation.train_restarts(demos, random_x, y_random, dyn, tcfg, cfg.seed, log=run.metrics,
                                                     std_floor=p.dynamics.std_floor, progress=progress, tl=TASK,
                                                     kinematics=kin, held_out=held, device=device)
         for r, tr in enumerate(trs):
-            save_state(tr, cfg.dir(TRANSLATORS) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
+            save_state(tr, cfg.dir(cfg.translators_dir) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
                 **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
                 "init_seed": translation.restart_seed(cfg.seed, r),
                 "x_columns": {pr: translation.canonical_x_columns(pr, TASK) for pr in layout.PAIRINGS},
@@ -53,7 +53,7 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
             "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
                            f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
             TASK)
-        data.write_table(table, cfg.dir(BC_DATA) / DATA_FILE["translated"])
+        data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["translated"])
         with torch.no_grad():
             replay = replay_check(df, p.env)
             # G and D of each restart on their own; restart 0 under the plain names

@@ -1,10 +1,11 @@
 """LfDT and BC without translation on the real-robot tasks, with the simulated experiment's code.
 
-Data layout per task and seed (``data/twin/<task>/s<seed>/``), each a recording directory of per-episode
-Parquet files: ``random_Y``, ``random_R1H``, ``random_HR2``, ``demos_R1H``, ``demos_HR2``. With backend 'sim'
-the twin writes them, one data set per seed; with backend 'real' they are the recordings made on the robots with
-``python -m lfdt.robot record-random`` / ``record-demos`` under ``twin.real_dir/<task>/`` (one set, the same for
-every seed). Models go to ``models/twin/<task>/s<seed>/``.
+Data layout per task and seed (``<root>/<task>/s<seed>/``, the root dvc.yaml's ``paths.twin_data``), each a
+recording directory of per-episode Parquet files: ``random_Y``, ``random_R1H``, ``random_HR2``, ``demos_R1H``,
+``demos_HR2``. With backend 'sim' the twin writes them, one data set per seed; with backend 'real' they are the
+recordings made on the robots with ``python -m lfdt.robot record-random`` / ``record-demos`` under
+``twin.real_dir/<task>/`` (one set, the same for every seed). Models go to ``<models>/<task>/s<seed>/`` (dvc.yaml's
+``paths.twin_models``).
 
 Training reuses :mod:`lfdt.dynamics`, :mod:`lfdt.translation` and :mod:`lfdt.bc` with the task's layout:
 states are end positions (the robots' by forward kinematics, the hand's by its tag) and the object's pose,
@@ -110,21 +111,21 @@ def evaluate_policy(task: str, policy, trials: int, cfg: TwinConfig | None = Non
     return results
 
 
-def recordings(task: str, seed: int, root: str | Path = "data/twin") -> dict[str, Path]:
-    """The recording directories of a task's run with one seed."""
+def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
+    """The recording directories of a task's run with one seed under ``root`` (the twin's data folder)."""
     base = Path(root) / task / f"s{seed}"
     names = [f"random_{d}" for d in layout.DOMAINS] + [f"demos_{p}" for p in layout.PAIRINGS]
     return {n: base / n for n in names}
 
 
-def collect(task: str, p: TwinParams, root: str | Path = "data/twin") -> dict:
+def collect(task: str, p: TwinParams, root: str | Path) -> dict:
     """Write (sim) or import (real) the recordings of a task for every seed; returns statistics per seed and
     recording."""
     shutil.rmtree(Path(root) / task, ignore_errors=True)
     return {f"s{seed}": collect_seed(task, p, seed, root) for seed in p.seeds}
 
 
-def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path = "data/twin") -> dict:
+def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path) -> dict:
     """The recordings of one seed's run; returns statistics per recording."""
     out = recordings(task, seed, root)
     stats = {}
@@ -149,7 +150,7 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path = "data/t
     return stats
 
 
-def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str | Path = "data/twin",
+def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str | Path,
           log: Callable[[dict, int], None] | None = None, device: str | torch.device = "cpu") -> dict:
     """Fit F, F^-1, the translator, BC on the translation (lfdt) and BC on the raw demonstrations, all with one
     seed on ``device``, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
