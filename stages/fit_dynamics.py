@@ -1,6 +1,7 @@
 """DVC stage: fit the forward model F and the inverse model F^-1 on domain Y's random-motion data."""
 
 from lfdt import dynamics, layout, stage
+from lfdt.jobs.common import DYNAMICS_FILE
 from lfdt.nets import save_state, torch_device
 
 
@@ -18,7 +19,7 @@ def run() -> None:
             models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: f.metrics(m, i), progress=bar,
                                                 device=device)
         curve = res.pop("curve")
-        save_state(models, args.out_dir / "dynamics.pt", {
+        save_state(models, args.out_dir / DYNAMICS_FILE, {
             "dynamics": cfg.model_dump(), "state_columns": layout.state_columns("Y"),
             "action_columns": layout.action_columns("Y"), "y_norm": models.y_norm.to_dict(),
             "delta_scale": models.delta_scale.tolist(),
