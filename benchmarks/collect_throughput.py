@@ -4,7 +4,7 @@ raw:        one MjData, ``mj_step(model, data, nstep=frame_skip)`` per control s
             command each step (no Python work besides setting ctrl): physics steps/s / frame_skip
             gives the raw control-step rate.
 gymnasium:  ``BoxPushEnv.step`` in a Python loop (observation, reward and info computed).
-collect:    ``lfdt.random_motion.collect_random`` (batched ``mujoco.rollout`` on ``random.threads``
+collect:    ``lfdt.tasks.box_push.random_motion.collect_random`` (batched ``mujoco.rollout`` on ``random.threads``
             threads, plus drawing commands and building the Arrow table): transitions/s.
 
 Bar (issue 2): collect / raw >= 0.8. Writes benchmarks/results/collect_throughput.json.
@@ -23,8 +23,8 @@ import mujoco
 import numpy as np
 
 from lfdt.config import load_params
-from lfdt.envs import BoxPushEnv, BoxPushModel
-from lfdt.random_motion import collect_random
+from lfdt.tasks.box_push.env import BoxPushEnv, BoxPushModel
+from lfdt.tasks.box_push.random_motion import collect_random
 
 
 def raw_rate(domain: str, cfg, steps: int) -> float:

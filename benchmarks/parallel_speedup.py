@@ -22,6 +22,7 @@ from lfdt import layout, parallel, translation
 from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.jobs.translator import box_push_kinematics
+from lfdt.tasks.box_push import layout as box_layout
 
 
 def _transitions(n: int, rng: np.random.Generator) -> translation.Transitions:
@@ -42,7 +43,7 @@ def translator_job(job: tuple[int, int], progress=None) -> float:
     cfg = TranslatorConfig(iterations=iterations, select_every=500, log_every=500)
     t0 = time.perf_counter()
     translation.train_translator(demos, rand, y, dyn, cfg, seed=seed, progress=progress, held_out=held,
-                                 kinematics=box_push_kinematics(EnvConfig()), tl=layout.BOX_PUSH)
+                                 kinematics=box_push_kinematics(EnvConfig()), tl=box_layout.BOX_PUSH)
     return time.perf_counter() - t0
 
 

@@ -27,6 +27,7 @@ from lfdt.config import BCConfig, EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.jobs.translator import box_push_kinematics
 from lfdt.nets import mlp
+from lfdt.tasks.box_push import layout as box_layout
 
 
 def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> translation.Transitions:
@@ -39,7 +40,7 @@ def ours_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels, rng)
     rand = {p: fake_transitions(20_000, 21, rng) for p in layout.PAIRINGS}
     y = rng.normal(size=(20_000, 19)).astype(np.float32)
     _, st = translation.train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0,
-                                         kinematics=box_push_kinematics(EnvConfig()), tl=layout.BOX_PUSH)
+                                         kinematics=box_push_kinematics(EnvConfig()), tl=box_layout.BOX_PUSH)
     return st["iterations_per_s"]
 
 
@@ -75,10 +76,10 @@ def bare_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels) -> f
 def ours_bc(iters: int, cfg: BCConfig, rng) -> float:
     n = 9_000
     df = pd.DataFrame(rng.normal(size=(n, 25)).astype(np.float32),
-                      columns=[layout.STATE_PREFIX + c for c in layout.state_columns("Y")] +
-                      [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")])
+                      columns=[layout.STATE_PREFIX + c for c in box_layout.state_columns("Y")] +
+                      [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")])
     df["episode_index"] = np.arange(n) // 25
-    task = bc.tasks_for("lfdt", translated=df, tl=layout.BOX_PUSH)[0]
+    task = bc.tasks_for("lfdt", translated=df, tl=box_layout.BOX_PUSH)[0]
     _, st = bc.train_member(task, cfg.model_copy(update={"iterations": iters}), seed=0)
     return st["iterations_per_s"]
 

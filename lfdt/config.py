@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lfdt import layout
+from lfdt.tasks.box_push import layout as box_layout
 
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
@@ -145,12 +145,12 @@ class EnvConfig(Strict):
 
     @model_validator(mode="after")
     def _joint_counts(self) -> EnvConfig:
-        # every data file, network and translator is laid out for these joint counts (lfdt.layout)
+        # every data file, network and translator is laid out for these joint counts (lfdt.tasks.box_push.layout)
         for name, arm in (("robot", "r1"), ("human", "h")):
-            want = layout.ARM_JOINTS[arm]
+            want = box_layout.ARM_JOINTS[arm]
             if len(getattr(self, name).links) != want:
                 raise ValueError(f"{name}.links has {len(getattr(self, name).links)} links; the state layout "
-                                 f"(lfdt/layout.py ARM_JOINTS) is built for {want}")
+                                 f"(lfdt/tasks/box_push/layout.py ARM_JOINTS) is built for {want}")
         return self
 
 
@@ -511,8 +511,8 @@ class TwinParams(Strict):
     def _learned_kinematics(self) -> TwinParams:
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds has duplicates: {self.seeds}")
-        # names are checked by the twin stages against lfdt.tasks (importing it here would make every stage
-        # depend on the twin's task modules)
+        # names are checked by the twin stages against lfdt.tasks.registry.PLANAR (importing a task here would make
+        # every stage depend on the twin's task modules)
         if len(set(self.tasks)) != len(self.tasks):
             raise ValueError(f"tasks has duplicates: {self.tasks}")
         if self.translator.kinematics != "learned":

@@ -2,8 +2,8 @@
 
 One row per transition: ``episode_index``, ``frame_index``, ``timestamp`` (s since the episode
 started), the state columns (``state.<name>``), the action columns (``action.<name>``), the next
-state (``next_state.<name>``), and kind-specific extras. Column names come from
-:mod:`lfdt.layout`. Every field carries a ``description`` (and ``unit``) in its pyarrow metadata;
+state (``next_state.<name>``), and kind-specific extras. Column names come from the task's
+:class:`lfdt.layout.TaskLayout`. Every field carries a ``description`` (and ``unit``) in its pyarrow metadata;
 the schema metadata key ``lfdt`` holds a JSON document with the kind, the domain, the layout, the
 environment parameters, the seed and whatever the writer adds.
 
@@ -28,6 +28,7 @@ import pyarrow.parquet as pq
 from lfdt import layout
 from lfdt.errors import StageError
 from lfdt.files import temp_path
+from lfdt.tasks.box_push import layout as box_layout
 
 META_KEY = b"lfdt"
 INDEX_COLUMNS = ("episode_index", "frame_index", "timestamp")
@@ -167,7 +168,7 @@ def check_identity(path: str | Path, kind: str | None = None, domain: str | None
         raise
     except ValueError as e:
         raise DataFileError(str(e)) from None
-    have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", layout.BOX_PUSH.name)}
+    have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", box_layout.BOX_PUSH.name)}
     want = {"kind": kind, "domain": domain, "task": task}
     wrong = [f"{k} {have[k]!r} where {v!r} is needed" for k, v in want.items() if v is not None and have[k] != v]
     if wrong:

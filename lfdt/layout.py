@@ -1,13 +1,12 @@
-"""The one observation/action layout used by every environment, data file and stage.
+"""What every task's layout shares: domains, slots, the arms in each domain and the column prefixes.
 
 State vectors are the concatenation ``[slot-1 arm, slot-2 arm, object]``. Slot 1 is where
 Robot1 stands (left, x < 0), slot 2 where Robot2 stands (right). In domain X the human
 stand-in takes one slot: R1H = (Robot1, Human), HR2 = (Human, Robot2). Domain Y = (Robot1, Robot2).
 
-Every arm contributes, in this order, its joint angles ``q*`` (rad), joint velocities
-``dq*`` (rad/s) and end position ``ee_x, ee_y`` (m, world frame). The object (box)
-contributes ``x, y`` (m) and ``yaw`` (rad). Column names are ``<arm>.<quantity>``, e.g.
-``r1.q0``, ``h.ee_y``, ``box.yaw``; stages select groups by name through this module.
+Which columns an arm and the object contribute is the task's own :class:`TaskLayout`: the box push's is
+:data:`lfdt.tasks.box_push.layout.BOX_PUSH` (joint angles, joint velocities and end position per arm), a
+real-robot task's comes from :attr:`lfdt.tasks.base.PlanarTask.layout`. Column names are ``<arm>.<quantity>``.
 """
 
 from __future__ import annotations
@@ -20,36 +19,13 @@ Domain = Literal["Y", "R1H", "HR2"]
 DOMAINS: tuple[str, ...] = ("Y", "R1H", "HR2")
 PAIRINGS: tuple[str, ...] = ("R1H", "HR2")
 
-ARM_JOINTS: dict[str, int] = {"r1": 3, "r2": 3, "h": 4}
 ARM_TITLES: dict[str, str] = {"r1": "Robot1", "r2": "Robot2", "h": "Human stand-in"}
 DOMAIN_ARMS: dict[str, tuple[str, str]] = {"Y": ("r1", "r2"), "R1H": ("r1", "h"), "HR2": ("h", "r2")}
-OBJECT_COLUMNS: tuple[str, ...] = ("box.x", "box.y", "box.yaw")
 
 STATE_PREFIX = "state."
 NEXT_STATE_PREFIX = "next_state."
 ACTION_PREFIX = "action."
 HUMAN_ACTION_PREFIX = "human_action."
-
-
-def arm_columns(arm: str) -> list[str]:
-    """State column names of one arm: joint angles, joint velocities, end position."""
-    n = ARM_JOINTS[arm]
-    return [f"{arm}.q{i}" for i in range(n)] + [f"{arm}.dq{i}" for i in range(n)] + [f"{arm}.ee_x", f"{arm}.ee_y"]
-
-
-def arm_action_columns(arm: str) -> list[str]:
-    """Action column names of one arm: one normalised torque command per joint."""
-    return [f"{arm}.tau{i}" for i in range(ARM_JOINTS[arm])]
-
-
-def state_columns(domain: str) -> list[str]:
-    """State column names of a box-push domain, in observation-vector order (:data:`BOX_PUSH`'s)."""
-    return BOX_PUSH.state_columns(domain)
-
-
-def action_columns(domain: str) -> list[str]:
-    """Action column names of a box-push domain, in action-vector order (both slots; :data:`BOX_PUSH`'s)."""
-    return BOX_PUSH.action_columns(domain)
 
 
 def robot_arm(pairing: str) -> str:
@@ -59,32 +35,12 @@ def robot_arm(pairing: str) -> str:
     return "r1" if pairing == "R1H" else "r2"
 
 
-def groups(domain: str) -> dict[str, list[str]]:
-    """Named column groups of a domain: the paper's x^H, x^Ri, x^O (X) or y^R1, y^R2, y^O (Y)."""
-    if domain == "Y":
-        return {"y^R1": arm_columns("r1"), "y^R2": arm_columns("r2"), "y^O": list(OBJECT_COLUMNS)}
-    ri = robot_arm(domain)
-    return {"x^H": arm_columns("h"), f"x^R{ri[1]}": arm_columns(ri), "x^O": list(OBJECT_COLUMNS)}
-
-
-def describe() -> dict:
-    """The whole layout as a JSON-serialisable dict (stored in every Parquet file's metadata)."""
-    return {
-        "slots": "state = [slot-1 arm, slot-2 arm, object]; slot 1 is Robot1's place (left), slot 2 Robot2's",
-        "domains": {d: {"arms": list(DOMAIN_ARMS[d]), "state": state_columns(d), "action": action_columns(d),
-                        "groups": groups(d)} for d in DOMAINS},
-        "units": {"q": "rad", "dq": "rad/s", "ee_x/ee_y/box.x/box.y": "m, world frame", "box.yaw": "rad",
-                  "tau": "normalised torque command in [-1, 1] (times the actuator gear gives N m)"},
-        "prefixes": {"state": STATE_PREFIX, "next_state": NEXT_STATE_PREFIX, "action": ACTION_PREFIX,
-                     "human_action": HUMAN_ACTION_PREFIX},
-    }
-
-
 class TaskLayout:
     """The column layout of one task: state columns per arm, action columns per arm, object columns.
 
     Domains and slots are shared by every task (:data:`DOMAIN_ARMS`); the box push of the simulated
-    experiment is :data:`BOX_PUSH`, the real-robot tasks' layouts come from :mod:`lfdt.tasks`.
+    experiment is :data:`lfdt.tasks.box_push.layout.BOX_PUSH`, the real-robot tasks' layouts come from
+    :mod:`lfdt.tasks`.
     """
 
     def __init__(self, name: str, arm_cols: dict[str, list[str]], action_cols: dict[str, list[str]],
@@ -130,9 +86,3 @@ class TaskLayout:
         """JSON-serialisable description (stored in Parquet metadata)."""
         return {"task": self.name, "domains": {d: {"arms": list(DOMAIN_ARMS[d]), "state": self.state_columns(d),
                                                    "action": self.action_columns(d)} for d in DOMAINS}}
-
-
-BOX_PUSH = TaskLayout("box_push", {a: arm_columns(a) for a in ARM_JOINTS},
-                      {a: arm_action_columns(a) for a in ARM_JOINTS}, list(OBJECT_COLUMNS),
-                      {a: [f"{a}.ee_x", f"{a}.ee_y"] for a in ARM_JOINTS}, hand_actions_recorded=True)
-"""The simulated 2D dual-arm box push (the module-level functions above describe the same layout)."""

@@ -20,7 +20,7 @@ class Method:
     """Row title in Table I."""
     data: Literal["raw", "translated", "executed"]
     """What BC learns from: the raw demonstrations of X (one policy per robot), translated demonstrations, or
-    translated demonstrations re-executed in Y (:mod:`lfdt.reexecute`)."""
+    translated demonstrations re-executed in Y (:mod:`lfdt.tasks.box_push.reexecute`)."""
     translator: str | None = None
     """The translator method whose output this method reads (None: no translation)."""
     overrides: dict[str, float] = field(default_factory=dict)

@@ -1,6 +1,8 @@
 """DVC stage: roll out the SAC expert of one pairing until enough successful demonstrations."""
 
-from lfdt import data, experts, layout, stage
+from lfdt import data, layout, stage
+from lfdt.tasks.box_push import experts
+from lfdt.tasks.box_push import layout as box_layout
 
 
 def run() -> None:
@@ -27,7 +29,7 @@ def run() -> None:
         with f.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
         data.write_table(table, out)
-        data.check_transitions(out, "demos", args.pairing, layout.BOX_PUSH)
+        data.check_transitions(out, "demos", args.pairing, box_layout.BOX_PUSH)
         f.metrics(stats)
         f.report.update({"pairing": args.pairing, **stats})
     print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "

@@ -1,6 +1,8 @@
 """DVC stage: collect random-motion transitions in one domain (batched MuJoCo rollouts) to Parquet."""
 
-from lfdt import data, layout, random_motion, stage
+from lfdt import data, layout, stage
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import random_motion
 
 
 def run() -> None:
@@ -17,7 +19,7 @@ def run() -> None:
         with f.progress(cfg.transitions, f"random {args.domain}", "tr") as bar:
             table, stats = random_motion.collect_random(args.domain, p.env, cfg, progress=bar.update)
         data.write_table(table, out)
-        data.check_transitions(out, "random", args.domain, layout.BOX_PUSH)
+        data.check_transitions(out, "random", args.domain, box_layout.BOX_PUSH)
         stats["file_mb"] = out.stat().st_size / 1e6
         f.metrics(stats)
         f.report.update({"domain": args.domain, **stats})

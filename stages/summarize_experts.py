@@ -1,7 +1,8 @@
 """DVC stage: reports/experts.json, one entry per pairing (expert evaluation + demonstration statistics), and the
 protocol's premise measured: both robots replaying their programs together in Y, nobody adapting."""
 
-from lfdt import layout, programmed, stage
+from lfdt import layout, stage
+from lfdt.tasks.box_push import programmed
 
 PREMISE_EPISODES = 200
 

@@ -1,11 +1,12 @@
 """DVC stage: random motion and demonstrations of one real-robot task, from the twin or from robot recordings."""
 
-from lfdt import stage, tasks
+from lfdt import stage
+from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 
 
 def run() -> None:
-    args, all_params = stage.task_arguments(__doc__, tasks.NAMES, {
+    args, all_params = stage.task_arguments(__doc__, registry.PLANAR, {
         "data-dir": "where the recordings go, a folder per task", "reports": "where the report <task>_data.json goes"})
     task, p = args.task, all_params.twin
     with stage.frame(args.reports / f"{task}_data.json", "twin_collect", {"twin": p.model_dump()},

@@ -2,8 +2,9 @@
 
 from pathlib import Path
 
-from lfdt import stage, tasks, twin
+from lfdt import stage, twin
 from lfdt.robot import deploy_log
+from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 
 
@@ -21,7 +22,7 @@ def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
 
 
 def run() -> None:
-    args, all_params = stage.task_arguments(__doc__, tasks.NAMES, {
+    args, all_params = stage.task_arguments(__doc__, registry.PLANAR, {
         "models": "the models, a folder per task", "videos": "where the videos go, a folder per task",
         "reports": "where the report <task>_eval.json goes"})
     task, p = args.task, all_params.twin

@@ -1,12 +1,13 @@
 """DVC stage: dynamics, translator and BC (LfDT and BC without translation) for one real-robot task."""
 
-from lfdt import mlflow_runs, stage, tasks
+from lfdt import mlflow_runs, stage
 from lfdt.nets import torch_device
+from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 
 
 def run() -> None:
-    args, all_params = stage.task_arguments(__doc__, tasks.NAMES, {
+    args, all_params = stage.task_arguments(__doc__, registry.PLANAR, {
         "data-dir": "the recordings, a folder per task", "models": "where the models go, a folder per task",
         "reports": "where the report <task>_train.json goes"})
     task, p, device = args.task, all_params.twin, torch_device(all_params.device)

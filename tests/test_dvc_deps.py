@@ -2,6 +2,7 @@
 project modules), so a code change can never leave a stale result behind."""
 
 import ast
+import itertools
 import re
 from pathlib import Path
 
@@ -75,44 +76,126 @@ def covered(path: Path, deps: list[str]) -> bool:
     return any(rel == d or rel.startswith(d.rstrip("/") + "/") for d in deps)
 
 
-def stages() -> list[tuple[str, str, list[str]]]:
-    doc = yaml.safe_load((ROOT / "dvc.yaml").read_text())
-    return [(name, st["cmd"], [d if isinstance(d, str) else next(iter(d)) for d in st.get("deps", [])])
-            for name, st in doc["stages"].items()]
+REGISTRY = ROOT / "lfdt" / "tasks" / "registry.py"
+"""The task registry imports a task's module by name (importlib), out of the reach of :func:`imports_of`."""
 
 
-@pytest.mark.parametrize("name, cmd, deps", stages(), ids=[s[0] for s in stages()])
-def test_stage_deps_cover_import_closure(name, cmd, deps):
-    scripts = re.findall(r"(stages/[\w/]+\.py)", cmd)
-    modules = re.findall(r"python -m ([\w.]+)", cmd)
-    assert scripts or modules, f"stage {name}: no stage script found in its cmd {cmd!r}"
-    files: set[Path] = set()
-    for s in scripts:
-        files |= closure(ROOT / s)
-    for m in modules:
-        files |= closure(module_file(m))
-    missing = sorted(f.relative_to(ROOT).as_posix() for f in files if not covered(f, deps) and not inert(f))
-    assert not missing, f"stage {name} imports {missing} but dvc.yaml does not list them in its deps"
+def task_module(name: str) -> Path:
+    """The file of the module that holds task ``name``'s object, as the registry names it."""
+    from lfdt.tasks import registry
+
+    return module_file(registry.TASKS[name].split(":")[0])
 
 
-@pytest.mark.parametrize("name, cmd, deps", stages(), ids=[s[0] for s in stages()])
-def test_stage_deps_list_no_code_the_stage_does_not_import(name, cmd, deps):
-    """A code dep the command never imports reruns the stage for nothing (and every no-op repro checks it)."""
+def served_tasks(item: dict) -> list[str]:
+    """The tasks a stage instance looks up in the registry: its matrix item's ``task``, else every task."""
+    from lfdt.tasks import registry
+
+    return [item["task"]] if "task" in item else list(registry.NAMES)
+
+
+def required(cmd: str, item: dict) -> set[Path]:
+    """Every project file a stage instance's command runs: the import closure of its scripts and modules and, where
+    that holds the registry, the closure of the module of each task it serves."""
     files: set[Path] = set()
     for s in re.findall(r"(stages/[\w/]+\.py)", cmd):
         files |= closure(ROOT / s)
     for m in re.findall(r"python -m ([\w.]+)", cmd):
         files |= closure(module_file(m))
-    imported = {f.relative_to(ROOT).as_posix() for f in files}
-    extra = [d for d in deps if d.endswith(".py") and d not in imported]
+    if REGISTRY in files:
+        for task in served_tasks(item):
+            files |= closure(task_module(task))
+    return files
+
+
+def missing_deps(cmd: str, deps: list[str], item: dict) -> list[str]:
+    return sorted(f.relative_to(ROOT).as_posix() for f in required(cmd, item) if not covered(f, deps) and not inert(f))
+
+
+def extra_deps(cmd: str, deps: list[str], item: dict) -> list[str]:
+    imported = {f.relative_to(ROOT).as_posix() for f in required(cmd, item)}
+    return [d for d in deps if d.endswith(".py") and d not in imported]
+
+
+def _lookup(doc: dict, dotted: str):
+    for key in dotted.split("."):
+        doc = doc[key]
+    return doc
+
+
+def matrix_items(matrix: dict) -> list[dict]:
+    """A matrix stage's items, as DVC expands them (``${a.b}`` values from params.yaml or dvc.yaml's vars)."""
+    params = yaml.safe_load((ROOT / "params.yaml").read_text())
+    for v in yaml.safe_load((ROOT / "dvc.yaml").read_text()).get("vars", []):
+        if isinstance(v, dict):
+            params = {**params, **v}
+    axes = {}
+    for key, values in matrix.items():
+        ref = re.fullmatch(r"\$\{([\w.]+)\}", values) if isinstance(values, str) else None
+        axes[key] = _lookup(params, ref.group(1)) if ref else values
+    return [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
+
+
+def _expand(text: str, item: dict) -> str:
+    return re.sub(r"\$\{item\.(\w+)\}", lambda m: str(item[m.group(1)]), text)
+
+
+def stages() -> list[tuple[str, str, list[str], dict]]:
+    """Every stage instance (a matrix stage once per item, named as DVC names it) with its command and deps."""
+    doc = yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    out = []
+    for name, st in doc["stages"].items():
+        deps = [d if isinstance(d, str) else next(iter(d)) for d in st.get("deps", [])]
+        for item in matrix_items(st["matrix"]) if "matrix" in st else [{}]:
+            label = name + ("@" + "-".join(map(str, item.values())) if item else "")
+            out.append((label, _expand(st["cmd"], item), [_expand(d, item) for d in deps], item))
+    return out
+
+
+STAGES = stages()
+
+
+@pytest.mark.parametrize("name, cmd, deps, item", STAGES, ids=[s[0] for s in STAGES])
+def test_stage_deps_cover_import_closure(name, cmd, deps, item):
+    assert re.findall(r"(stages/[\w/]+\.py)", cmd) or re.findall(r"python -m ([\w.]+)", cmd), \
+        f"stage {name}: no stage script found in its cmd {cmd!r}"
+    missing = missing_deps(cmd, deps, item)
+    assert not missing, f"stage {name} imports {missing} but dvc.yaml does not list them in its deps"
+
+
+@pytest.mark.parametrize("name, cmd, deps, item", STAGES, ids=[s[0] for s in STAGES])
+def test_stage_deps_list_no_code_the_stage_does_not_import(name, cmd, deps, item):
+    """A code dep the command never imports reruns the stage for nothing (and every no-op repro checks it)."""
+    extra = extra_deps(cmd, deps, item)
     assert not extra, f"stage {name} lists {extra} in its deps but never imports them"
 
 
 def test_closure_follows_imports_transitively():
     # stages/train_translator.py imports lfdt.jobs.translator, which imports lfdt.translation, lfdt.dynamics and
-    # lfdt.envs
+    # lfdt.tasks.box_push.env
     files = {f.relative_to(ROOT).as_posix() for f in closure(ROOT / "stages/train_translator.py")}
-    assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/envs.py", "lfdt/config.py"} <= files
+    assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/tasks/box_push/env.py", "lfdt/config.py"} <= files
+
+
+def test_a_stage_that_looks_its_task_up_depends_on_that_task_alone():
+    """The registry imports by name: a twin stage instance needs its own task's module (and what it imports), and
+    another task's module is no dep of it."""
+    name, cmd, deps, item = next(s for s in STAGES if s[0] == "twin_collect@block_push")
+    assert "lfdt/tasks/block_push.py" in deps and REGISTRY in required(cmd, item)
+    assert missing_deps(cmd, [d for d in deps if d != "lfdt/tasks/block_push.py"], item) == \
+        ["lfdt/tasks/block_push.py"]
+    assert extra_deps(cmd, [*deps, "lfdt/tasks/peg_insertion.py"], item) == ["lfdt/tasks/peg_insertion.py"]
+
+
+def test_table1_stages_depend_on_no_other_task():
+    """The box push's stages import its modules directly, never the registry: no other task's code is theirs."""
+    for name, cmd, _, item in STAGES:
+        if name.startswith("twin_"):
+            continue
+        files = {f.relative_to(ROOT).as_posix() for f in required(cmd, item)}
+        assert REGISTRY.relative_to(ROOT).as_posix() not in files, name
+        assert not [f for f in files if f.startswith(("lfdt/twin/", "lfdt/robot/", "lfdt/tasks/block_push",
+                                                      "lfdt/tasks/peg_insertion", "lfdt/tasks/base"))], name
 
 
 def test_lock_holds_only_stages_dvc_yaml_defines():

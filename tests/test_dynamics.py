@@ -8,9 +8,9 @@ from lfdt import data
 from lfdt.config import DynamicsConfig, EnvConfig, RandomConfig
 from lfdt.dynamics import DynamicsModels, fit_dynamics, load_models, load_random_y, split_episodes
 from lfdt.errors import StageError
-from lfdt.layout import BOX_PUSH
 from lfdt.nets import load_state, save_state
-from lfdt.random_motion import collect_random
+from lfdt.tasks.box_push.layout import BOX_PUSH
+from lfdt.tasks.box_push.random_motion import collect_random
 
 
 @pytest.fixture(scope="module")

@@ -18,6 +18,7 @@ import smoke
 import yaml
 
 from lfdt import data, layout, methods, stage
+from lfdt.tasks.box_push import layout as box_layout
 
 # with `pytest -n` (make test) these tests and the other module sharing the smoke_project fixture run on one worker,
 # so the smoke project's DAG is built once
@@ -53,11 +54,11 @@ def test_every_stage_ran(project):
 def test_artifact_schemas(project):
     dst, _ = project
     for domain in layout.DOMAINS:
-        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain, layout.BOX_PUSH)
+        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain, box_layout.BOX_PUSH)
         assert data.read_transitions(dst / f"data/random/{domain}.parquet").shape[0] == 3000
         assert meta["random"]["transitions"] == 3000
     for pairing in layout.PAIRINGS:
-        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing, layout.BOX_PUSH)
+        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing, box_layout.BOX_PUSH)
         df = data.read_transitions(dst / f"data/demos/{pairing}.parquet")
         assert df.episode_index.nunique() == 4
         cfg = json.loads((dst / f"models/experts/{pairing}/config.json").read_text())
@@ -101,8 +102,8 @@ def test_second_half_artifacts(project):
             assert meta["seed"] == seed
             df = data.read_transitions(path)
             assert df.episode_index.nunique() == 6 and set(df.source_pairing) == set(layout.PAIRINGS)
-            want = [layout.STATE_PREFIX + c for c in layout.state_columns("Y")]
-            want += [layout.ACTION_PREFIX + c for c in layout.action_columns("Y")]
+            want = [layout.STATE_PREFIX + c for c in box_layout.state_columns("Y")]
+            want += [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")]
             assert set(want) <= set(df.columns) and df[want].notna().all().all()
             d = tr["seeds"][str(seed)]
             assert d["replay_box_position_error_m"] >= 0 and 0 <= d["final/D/accuracy"] <= 1

@@ -7,10 +7,11 @@ each robot's program alone cannot do the task with the other robot's, and a huma
 import numpy as np
 import pytest
 
-from lfdt import layout, programmed
+from lfdt import layout
 from lfdt.config import EnvConfig, ProgramConfig
-from lfdt.envs import BoxPushEnv, forward_kinematics, jacobian
 from lfdt.seeding import episode_seed
+from lfdt.tasks.box_push import programmed
+from lfdt.tasks.box_push.env import BoxPushEnv, forward_kinematics, jacobian
 
 CFG = EnvConfig()
 PROGRAM = ProgramConfig()

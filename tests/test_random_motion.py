@@ -6,8 +6,9 @@ import pytest
 
 from lfdt import data, layout
 from lfdt.config import EnvConfig, RandomConfig
-from lfdt.envs import BoxPushEnv
-from lfdt.random_motion import collect_random, random_commands, rollout_episodes
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push.env import BoxPushEnv
+from lfdt.tasks.box_push.random_motion import collect_random, random_commands, rollout_episodes
 
 CFG = EnvConfig()
 
@@ -37,13 +38,13 @@ def test_collect_random_table(tmp_path):
     table, stats = collect_random("HR2", CFG, cfg)
     assert table.num_rows == 1_050 and stats["episodes"] == 11
     path = data.write_table(table, tmp_path / "HR2.parquet")
-    meta = data.check_transitions(path, "random", "HR2", layout.BOX_PUSH)
+    meta = data.check_transitions(path, "random", "HR2", box_layout.BOX_PUSH)
     assert meta["seed"] == 0 and meta["env"]["frame_skip"] == CFG.frame_skip
-    assert meta["layout"]["domains"]["HR2"]["state"] == layout.state_columns("HR2")
+    assert meta["layout"]["domains"]["HR2"]["state"] == box_layout.state_columns("HR2")
     df = data.read_transitions(path)
     # consecutive rows of an episode chain: next_state(t) == state(t+1)
-    s = df[[layout.STATE_PREFIX + c for c in layout.state_columns("HR2")]].to_numpy()
-    ns = df[[layout.NEXT_STATE_PREFIX + c for c in layout.state_columns("HR2")]].to_numpy()
+    s = df[[layout.STATE_PREFIX + c for c in box_layout.state_columns("HR2")]].to_numpy()
+    ns = df[[layout.NEXT_STATE_PREFIX + c for c in box_layout.state_columns("HR2")]].to_numpy()
     same_ep = df.episode_index.to_numpy()[1:] == df.episode_index.to_numpy()[:-1]
     np.testing.assert_allclose(ns[:-1][same_ep], s[1:][same_ep])
     assert df.frame_index.max() == 99 and df.timestamp.iloc[1] == pytest.approx(CFG.timestep * CFG.frame_skip)
@@ -66,12 +67,12 @@ def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
     # a random-motion file handed over as demonstrations is refused before anything trains on it
     with pytest.raises(data.DataFileError, match=r"R1H.parquet holds random data of domain R1H \(kind 'random' "
                                                  r"where 'demos' is needed\)"):
-        translation.load_x_transitions(path, "R1H", kind="demos", tl=layout.BOX_PUSH)
+        translation.load_x_transitions(path, "R1H", kind="demos", tl=box_layout.BOX_PUSH)
     with pytest.raises(data.DataFileError, match=r"domain 'R1H' where 'HR2' is needed"):
         data.read_transitions(path, kind="random", domain="HR2")
     with pytest.raises(data.DataFileError, match=r"task 'box_push' where 'block_push' is needed"):
         data.read_transitions(path, task="block_push")
-    assert len(translation.load_x_transitions(path, "R1H", kind="random", tl=layout.BOX_PUSH).x) == 200
+    assert len(translation.load_x_transitions(path, "R1H", kind="random", tl=box_layout.BOX_PUSH).x) == 200
     # corrupted bytes: the error names the file
     bad = tmp_path / "bad.parquet"
     raw = path.read_bytes()

@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from lfdt import data, tasks, twin
+from lfdt import data, twin
 from lfdt.robot import fake_mycobot as fm
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
@@ -37,6 +37,7 @@ from lfdt.robot.rig_config import (
 )
 from lfdt.robot.sim_rig import SimRig
 from lfdt.robot.tracker import ObjectPose, TrackedFrame, invert_pose, make_pose
+from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,7 +83,7 @@ def test_example_config_is_valid_and_errors_name_the_key(tmp_path: Path) -> None
 
 
 def test_cli_lists_match_the_pipeline() -> None:
-    assert TASKS == tasks.NAMES and METHODS == twin.METHODS
+    assert TASKS == registry.PLANAR and METHODS == twin.METHODS
     a = build_parser().parse_args(["record-random", "--sim", "--task", "block_push", "--domain", "Y", "--episodes",
                                    "1", "--steps", "2", "--out", "x"])
     assert a.func.__name__ == "run_record_random" and a.seed == 0 and a.step_delay == 0.0
@@ -137,7 +138,7 @@ def _assert_only_finished_episodes(out: Path) -> int:
         assert len(t) == STEPS, f"{f.name} has {len(t)} frames"
         assert (t.episode_index == i).all() and t.frame_index.tolist() == list(range(STEPS))
         assert not t.isna().any().any()
-    data.check_transitions(out, "random", "Y", tasks.get("block_push").layout)
+    data.check_transitions(out, "random", "Y", registry.get("block_push").layout)
     assert len(read_recording(out)) == STEPS * len(files)
     # anything else is the metadata or a temporary that never got a final name
     others = [p.name for p in out.iterdir() if p not in files]
@@ -188,7 +189,7 @@ def test_record_demos_sim_keeps_successful_episodes(tmp_path: Path, capsys) -> N
     assert main(["record-demos", "--sim", "--task", "peg_insertion", "--pairing", "HR2", "--episodes", "2",
                  "--out", str(out)]) == 0
     assert "kept 2 successful demonstrations" in capsys.readouterr().out
-    meta = data.check_transitions(out, "demos", "HR2", tasks.get("peg_insertion").layout)
+    meta = data.check_transitions(out, "demos", "HR2", registry.get("peg_insertion").layout)
     assert meta["source"] == "twin" and meta["task"] == "peg_insertion"
     df = data.read_transitions(out)
     assert sorted(df.episode_index.unique()) == [0, 1]
@@ -240,7 +241,7 @@ def test_sim_rig_interface() -> None:
     try:
         obs = rig.reset(seed=5)
         assert obs.shape == (7,) and rig.robots == ("r1",) and rig.human_slot == 1
-        assert rig.state_columns() == tasks.get("block_push").layout.state_columns("R1H")
+        assert rig.state_columns() == registry.get("block_push").layout.state_columns("R1H")
         with pytest.raises(ValueError, match=r"domain R1H commands \['r1'\]"):
             rig.act({"r1": [0.0, 0.0], "r2": [0.0, 0.0]})
         with pytest.raises(ValueError, match="human_target"):

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from lfdt import data, tasks
+from lfdt import data
 from lfdt.robot.sim_rig import SimRig
-from lfdt.tasks.base import PlanarTask
+from lfdt.tasks import registry
+from lfdt.tasks.base import PlanarTask, Task
 from lfdt.twin import pipeline as twin_pipeline
 from lfdt.twin.env import TwinEnv
 
@@ -48,18 +50,51 @@ class PuckSlide(PlanarTask):
         return {}, {}, {}, {}
 
 
+PUCK_SLIDE = PuckSlide()
+
+
 def test_registry_names_every_task_and_refuses_others() -> None:
-    assert tasks.NAMES == ("block_push", "peg_insertion")
-    for name, task in tasks.TASKS.items():
-        assert task.name == name and task.layout.name == name
-        assert len(task.layout.state_columns("Y")) == 7
+    assert registry.NAMES == ("box_push", "block_push", "peg_insertion")
+    assert registry.PLANAR == ("block_push", "peg_insertion")
+    for name in registry.NAMES:
+        task = registry.get(name)
+        assert isinstance(task, Task) and task.name == name and task.layout.name == name
+        assert isinstance(task, PlanarTask) == (name in registry.PLANAR)
+    for name in registry.PLANAR:
+        assert len(registry.get(name).layout.state_columns("Y")) == 7
     with pytest.raises(ValueError, match=r"unknown task 'slide'.*block_push"):
-        tasks.get("slide")
+        registry.get("slide")
+
+
+def test_the_registry_imports_a_task_only_when_asked_for() -> None:
+    code = ("import sys; from lfdt.tasks import registry; "
+            "loaded = lambda: sorted(m for m in sys.modules if m.startswith(('lfdt.tasks.', 'lfdt.twin')))"
+            "; print(loaded()); registry.get('box_push'); print(loaded())")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    before, after = out.stdout.splitlines()
+    assert before == "['lfdt.tasks.registry']"
+    assert "lfdt.tasks.box_push.task" in after and "block_push" not in after and "lfdt.twin" not in after
+
+
+@pytest.mark.parametrize("name", registry.NAMES)
+def test_every_task_makes_its_environment_in_every_domain(name) -> None:
+    """The protocol the task-agnostic code relies on: observations in the layout's order, success in the info."""
+    task = registry.get(name)
+    for domain in ("Y", "R1H", "HR2"):
+        env = task.make_env(domain)
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (len(task.layout.state_columns(domain)),)
+        assert env.action_space.shape is not None
+        _, _, terminated, _, info = env.step(env.action_space.sample() * 0)
+        assert terminated == info["is_success"]
+        env.close()
 
 
 def test_a_new_task_is_one_class_and_one_entry(monkeypatch, tmp_path) -> None:
-    monkeypatch.setitem(tasks.TASKS, "puck_slide", PuckSlide())
-    env = TwinEnv("puck_slide", "Y")
+    monkeypatch.setitem(registry.TASKS, "puck_slide", f"{__name__}:PUCK_SLIDE")
+    assert registry.get("puck_slide") is PUCK_SLIDE
+    env = registry.get("puck_slide").make_env("Y")
+    assert isinstance(env, TwinEnv)
     obs, info = env.reset(seed=0)
     assert obs.shape == (7,) and not info["is_success"]
     assert env.layout.state_columns("Y")[-3:] == ["obj.x", "obj.y", "obj.yaw"]

@@ -8,11 +8,12 @@ import torch
 from lfdt import data, layout, translation
 from lfdt.config import EnvConfig, RandomConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.envs import replay_check
 from lfdt.jobs.translator import box_push_kinematics
-from lfdt.random_motion import collect_random
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push.env import replay_check
+from lfdt.tasks.box_push.random_motion import collect_random
 
-TL = layout.BOX_PUSH
+TL = box_layout.BOX_PUSH
 """The task these tests translate: the simulated box push."""
 
 
@@ -31,9 +32,9 @@ def test_methods_are_weights_at_zero():
 def test_canonical_columns_and_robot_slot():
     for p in layout.PAIRINGS:
         cols = translation.canonical_x_columns(p, TL)
-        assert cols[:8] == layout.arm_columns(layout.robot_arm(p)) and cols[8:18] == layout.arm_columns("h")
-        y = layout.state_columns("Y")
-        assert y[TL.robot_y_slice(p)] == layout.arm_columns(layout.robot_arm(p))
+        assert cols[:8] == box_layout.arm_columns(layout.robot_arm(p)) and cols[8:18] == box_layout.arm_columns("h")
+        y = box_layout.state_columns("Y")
+        assert y[TL.robot_y_slice(p)] == box_layout.arm_columns(layout.robot_arm(p))
 
 
 @pytest.fixture(scope="module")
@@ -46,8 +47,8 @@ def tiny(tmp_path_factory):
         paths[d] = data.write_table(table, root / f"{d}.parquet")
     dyn = DynamicsModels(19, 6, [32, 32])
     y = data.read_transitions(paths["Y"])
-    dyn.y_norm.mean.copy_(torch.tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].mean().to_numpy()))
-    dyn.y_norm.std.copy_(torch.tensor(y[[f"state.{c}" for c in layout.state_columns("Y")]].std().to_numpy()))
+    dyn.y_norm.mean.copy_(torch.tensor(y[[f"state.{c}" for c in box_layout.state_columns("Y")]].mean().to_numpy()))
+    dyn.y_norm.std.copy_(torch.tensor(y[[f"state.{c}" for c in box_layout.state_columns("Y")]].std().to_numpy()))
     return env, paths, dyn
 
 
@@ -58,7 +59,7 @@ def test_skips_put_hand_and_object_where_they_belong(tiny):
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True, tl=TL)
     torch.nn.init.zeros_(tr.G[-1].weight)
     torch.nn.init.zeros_(tr.G[-1].bias)  # G's own output is 0: only the skips remain
-    y_cols = layout.state_columns("Y")
+    y_cols = box_layout.state_columns("Y")
     for p in layout.PAIRINGS:
         x = random_x[p].x[:5]
         y = dyn.y_norm.inverse(tr.translate(x, p)).numpy()
@@ -92,7 +93,7 @@ def test_replay_of_true_transitions_is_consistent(tiny):
     assert res["replayed_demos"] == 3
     assert res["replay_box_position_error_m"] < 1e-6 and res["replay_box_yaw_error_rad"] < 1e-6
     shuffled = df.copy()
-    acts = [f"action.{c}" for c in layout.action_columns("Y")]
+    acts = [f"action.{c}" for c in box_layout.action_columns("Y")]
     shuffled[acts] = -shuffled[acts].to_numpy()
     assert replay_check(shuffled, env)["replay_box_position_error_m"] > 1e-4
 
@@ -107,8 +108,8 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
     tr.y_std.copy_(dyn.y_norm.std)
     random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
-    y_cols = layout.state_columns("Y")
-    from lfdt.envs import arm_specs, forward_kinematics
+    y_cols = box_layout.state_columns("Y")
+    from lfdt.tasks.box_push.env import arm_specs, forward_kinematics
 
     for p in layout.PAIRINGS:
         t = random_x[p]
@@ -179,7 +180,8 @@ def test_training_and_diagnostics_raise_no_warnings(tiny):
     kin = box_push_kinematics(env)
     cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16)
     # a writable copy, as load_random_y gives the stage
-    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in layout.state_columns("Y")]].to_numpy(np.float32).copy()
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_layout.state_columns("Y")]]
+    y = y.to_numpy(np.float32).copy()
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         tr, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin, tl=TL)

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from lfdt import data, layout, tasks
+from lfdt import data, layout
 from lfdt.robot.recording import EpisodeRecorder, read_recording
+from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 from lfdt.twin.env import TwinConfig, TwinEnv
 from lfdt.twin.programs import TwinDemonstrator
@@ -19,7 +20,7 @@ def run(env, policy, seed):
     return info, steps, obs
 
 
-@pytest.mark.parametrize("task", tasks.NAMES)
+@pytest.mark.parametrize("task", registry.PLANAR)
 @pytest.mark.parametrize("pairing", layout.PAIRINGS)
 def test_scripted_demonstrations_succeed(task, pairing):
     ok = 0
@@ -95,7 +96,7 @@ def test_same_seed_same_trajectory():
 def test_recordings_follow_the_data_conventions(tmp_path):
     n = twin_pipeline.record_random("block_push", "R1H", 95, 30, 0, tmp_path / "random_R1H")
     assert n == 95
-    meta = data.check_transitions(tmp_path / "random_R1H", "random", "R1H", tasks.get("block_push").layout)
+    meta = data.check_transitions(tmp_path / "random_R1H", "random", "R1H", registry.get("block_push").layout)
     assert meta["task"] == "block_push"
     df = read_recording(tmp_path / "random_R1H")
     assert len(df) == 95 and df.episode_index.nunique() == 4

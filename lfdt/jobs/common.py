@@ -14,12 +14,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfdt import layout, methods, stage
+from lfdt import methods, stage
+from lfdt.tasks.box_push import layout as box_layout
 
 DYNAMICS_FILE = "dynamics.pt"
 """F and F^-1 in the dynamics folder (``stages/fit_dynamics.py`` writes it)."""
 
-TASK = layout.BOX_PUSH
+TASK = box_layout.BOX_PUSH
 """The layout of the task the matrix stages serve: the simulated box push of Table I."""
 
 DATA_FILE = {"raw": None, "translated": "translated.parquet", "executed": "executed.parquet"}

@@ -11,9 +11,10 @@ import torch
 
 from lfdt import bc, evaluation, mlflow_runs, stage
 from lfdt.config import EnvConfig
-from lfdt.envs import BoxPushEnv
 from lfdt.jobs.common import TASK, Config, numeric
 from lfdt.parallel import Progress
+from lfdt.tasks.box_push.env import BoxPushEnv
+from lfdt.tasks.box_push.task import TASK as BOX_PUSH_TASK
 
 
 def evaluate_job(cfg: Config, progress: Progress | None = None) -> dict:
@@ -51,8 +52,7 @@ def box_push_trials(policy: Callable[[np.ndarray], np.ndarray], env_cfg: EnvConf
                     purpose: str = "evaluation") -> list[dict]:
     """Run a policy in the box push's Y from the fixed start states; per-trial outcome, first ``videos`` as mp4."""
     def make_env(record: bool) -> BoxPushEnv:
-        return BoxPushEnv("Y", env_cfg, render_mode="rgb_array" if record else None, width=video_size,
-                          height=video_size)
+        return BOX_PUSH_TASK.make_env("Y", env_cfg, "rgb_array" if record else None, video_size)
 
     results = evaluation.rollout_trials(policy, make_env, trials, videos, video_dir, progress, purpose)
     for r in results:

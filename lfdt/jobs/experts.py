@@ -6,10 +6,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfdt import experts, mlflow_runs, stage
+from lfdt import mlflow_runs, stage
 from lfdt.jobs.common import numeric
 from lfdt.nets import torch_device
 from lfdt.parallel import Progress
+from lfdt.tasks.box_push import experts
 
 
 @dataclass(frozen=True)

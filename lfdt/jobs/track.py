@@ -5,10 +5,12 @@ from __future__ import annotations
 import dataclasses
 import time
 
-from lfdt import data, layout, methods, mlflow_runs, reexecute, stage, translation
+from lfdt import data, methods, mlflow_runs, stage, translation
 from lfdt.dynamics import load_models
 from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.parallel import Progress
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import reexecute
 
 
 def track_job(cfg: Config, progress: Progress | None = None) -> dict:
@@ -25,7 +27,7 @@ def track_job(cfg: Config, progress: Progress | None = None) -> dict:
                                        progress=(lambda: progress.update(1)) if progress is not None else None)
         table = translation.translated_table(out, {
             "kind": "executed", "domain": "Y", **cfg.tags(), "track": p.track.model_dump(),
-            "source": str(source.dir(cfg.bc_data_dir) / DATA_FILE["translated"]), "layout": layout.describe(),
+            "source": str(source.dir(cfg.bc_data_dir) / DATA_FILE["translated"]), "layout": box_layout.describe(),
             "description": "translated demonstrations re-executed in Y in closed loop; only the executions that "
                            "solved the task; states and actions as really visited and sent"}, TASK)
         data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["executed"])

@@ -9,10 +9,11 @@ import torch
 from lfdt import data, layout, mlflow_runs, stage, translation
 from lfdt.config import EnvConfig
 from lfdt.dynamics import load_models, load_random_y
-from lfdt.envs import arm_specs, replay_check
 from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.nets import save_state, torch_device
 from lfdt.parallel import Progress
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push.env import arm_specs, replay_check
 
 
 def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
@@ -49,7 +50,7 @@ def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
                                          p.env.timestep * p.env.frame_skip, TASK)
         table = translation.translated_table(df, {
             "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
-            "source_episodes": episodes, "layout": layout.describe(),
+            "source_episodes": episodes, "layout": box_layout.describe(),
             "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
                            f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
             TASK)

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from lfdt import tasks, twin
+from lfdt import twin
 from lfdt.robot.arm import (
     ArmNotResponding,
     MyCobotArm,
@@ -32,12 +32,13 @@ from lfdt.robot.arm import (
     check_command,
     stop_on_interrupt,
 )
+from lfdt.tasks import registry
 
 EXIT_FAILED = 2
 """A refused command or an arm that does not answer (the same code argparse uses for bad arguments)."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C (128 + SIGINT), as shells report it."""
-TASKS = tasks.NAMES
+TASKS = registry.PLANAR
 METHODS = twin.METHODS
 
 

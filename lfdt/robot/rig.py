@@ -10,7 +10,7 @@ comes from the table tag, whose pose in the world frame is configured (so :class
 reports in the world frame directly). To replay :class:`~lfdt.twin.programs.ProgrammedMotion` unchanged, put the world
 frame where the twin's is (see :func:`~lfdt.robot.rig_config.example_rig_config`).
 
-**State** (layout ``tasks.get(task).layout.state_columns(domain)``, metres and radians): per slot the end position in
+**State** (layout ``registry.get(task).layout.state_columns(domain)``, metres and radians): per slot the end position in
 the task plane (a robot's flange from forward kinematics of its joint angles, moved to the world frame; the hand's
 tag centre from the tracker), then the object tag's position in the plane and its angle in the plane: the twist of
 the tag's rotation about the plane's normal (block push: yaw about world +z; peg insertion: pitch about world +y,
@@ -34,15 +34,16 @@ from typing import Any
 
 import numpy as np
 
-from lfdt import layout, tasks
+from lfdt import layout
 from lfdt.robot.arm import stop_on_interrupt
+from lfdt.tasks import registry
 
 
 def plane_angle(rotation: np.ndarray, task: str) -> float:
     """In-plane angle (rad) of a rotation: its twist about the axis the task's object angle turns about."""
     from lfdt.robot.tracker import rotation_about_axis
 
-    return rotation_about_axis(rotation, tasks.get(task).normal)
+    return rotation_about_axis(rotation, registry.get(task).normal)
 
 
 def _wrap(angle: float) -> float:
@@ -57,7 +58,7 @@ class Rig(ABC):
     control_dt: float
 
     def _init_slots(self, task: str, domain: str) -> None:
-        task_def = tasks.get(task)
+        task_def = registry.get(task)
         if domain not in layout.DOMAINS:
             raise ValueError(f"unknown domain {domain!r}; expected one of {layout.DOMAINS}")
         self.task, self.domain = task, domain

@@ -12,10 +12,10 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lfdt import tasks
 from lfdt.files import temp_path
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyLimits
+from lfdt.tasks import registry
 
 HUMAN_DRIVERS = ("scripted", "random")
 
@@ -152,8 +152,8 @@ class RigConfig(_Model):
 
     @model_validator(mode="after")
     def _geometry(self) -> RigConfig:
-        if self.task not in tasks.NAMES or self.task not in kinematics.TASK_PLANES:
-            known = [t for t in tasks.NAMES if t in kinematics.TASK_PLANES]
+        if self.task not in registry.PLANAR or self.task not in kinematics.TASK_PLANES:
+            known = [t for t in registry.PLANAR if t in kinematics.TASK_PLANES]
             raise ValueError(f"task: {self.task!r} is not a real-robot task the arms are set up for; expected one "
                              f"of {known}")
         plane = kinematics.TASK_PLANES[self.task]
@@ -249,7 +249,7 @@ def load_rig_config(path: str | Path) -> RigConfig:
 
 def example_rig_config(task: str = "block_push") -> dict:
     """A documented example configuration (a JSON-ready dict) with the world frame placed like the twin's."""
-    tasks.get(task)  # an unknown task fails here, naming the known ones
+    registry.get(task)  # an unknown task fails here, naming the known ones
     notes = {
         "world frame": "the table frame, mm here, m in recordings; place it like the twin's: block_push: x to "
                        "Robot2's side, y away from the robots (the block's line at goal_line_m), z up; "
@@ -265,7 +265,7 @@ def example_rig_config(task: str = "block_push") -> dict:
         "control_period_s": "command -> next observation; the twin uses 0.1 s",
         "max_lost_frames": "frames without the needed tags before both arms are stopped",
     }
-    r1, r2, table, extra = tasks.get(task).example_rig()
+    r1, r2, table, extra = registry.get(task).example_rig()
     for arm in (r1, r2):
         arm.update({"speed": 30, "max_step_deg": 15.0})
     return {"_notes": notes, "task": task, "control_period_s": 0.1, "max_lost_frames": 5,

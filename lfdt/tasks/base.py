@@ -1,32 +1,59 @@
-"""The interface every real-robot task implements: what the twin, the recording tools and the rig need to know.
+"""What a task is: the small protocol every task implements (:class:`Task`), and the fuller interface of the
+real-robot tasks (:class:`PlanarTask`): what the twin, the recording tools and the rig need to know.
 
-A task is a planar problem for two arms (slot 1: Robot1 or the person, slot 2: Robot2 or the person) and one
-object. The twin (:mod:`lfdt.twin.env`) builds its MuJoCo scene from the task's parts, resets and scores episodes
-through it, and the demonstrations (:mod:`lfdt.twin.programs`) ask it where the programmed robot goes and how the
-scripted person adapts. Nothing outside a task's own module branches on its name.
+Dynamics, translation, BC and evaluation take a task's :attr:`Task.layout` and the environments it makes; they
+never import a particular task.
+
+A real-robot task is a planar problem for two arms (slot 1: Robot1 or the person, slot 2: Robot2 or the person)
+and one object. The twin (:mod:`lfdt.twin.env`) builds its MuJoCo scene from the task's parts, resets and scores
+episodes through it, and the demonstrations (:mod:`lfdt.twin.programs`) ask it where the programmed robot goes and
+how the scripted person adapts. Nothing outside a task's own module branches on its name.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from lfdt.layout import TaskLayout
 
 if TYPE_CHECKING:  # the twin imports the tasks; the type is only needed for hints
-    from lfdt.twin.env import TwinEnv
+    import gymnasium as gym
+
+    from lfdt.twin.env import TwinConfig, TwinEnv
 
 _UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
-class PlanarTask(ABC):
+@runtime_checkable
+class Task(Protocol):
+    """What every task offers the code that takes a task (the registry, :mod:`lfdt.tasks.registry`, hands these out).
+
+    The box push (:mod:`lfdt.tasks.box_push.task`) satisfies it by its shape, without importing this module; the
+    real-robot tasks through :class:`PlanarTask`.
+    """
+
+    name: str
+    """Registry key, also the name in params, file paths, data files' metadata and reports."""
+    layout: TaskLayout
+    """The task's columns: per arm its state and action columns, the object's, the ends' positions."""
+
+    def make_env(self, domain: str, config: Any = None, render_mode: str | None = None, size: int = 240) -> gym.Env:
+        """A Gymnasium environment of the task in ``domain`` ('Y', 'R1H' or 'HR2'; observations in
+        ``layout.state_columns(domain)`` order); ``config``: the task's environment settings (its defaults if None);
+        ``render_mode`` None or 'rgb_array' of ``size`` pixels square. Every step's info holds ``'is_success'``, the
+        task's success rule, and an episode terminates on it."""
+        ...
+
+
+class PlanarTask(Task, ABC):
     """One real-robot task: its plane, layout, scene, start states, success rule and demonstrators.
 
-    Subclasses set the class attributes and implement the abstract methods; register an instance in
-    :data:`lfdt.tasks.TASKS`.
+    Subclasses set the class attributes and implement the abstract methods; the module exposes an instance as
+    ``TASK``, registered in :data:`lfdt.tasks.registry.TASKS`.
     """
 
     name: str
@@ -59,6 +86,13 @@ class PlanarTask(ABC):
         pos = {arm: [f"{arm}.{a}", f"{arm}.{b}"] for arm in arms}
         return TaskLayout(self.name, pos, {arm: [f"{arm}.d{a}", f"{arm}.d{b}"] for arm in arms},
                           [f"obj.{a}", f"obj.{b}", f"obj.{self.angle}"], pos)
+
+    def make_env(self, domain: str, config: TwinConfig | None = None, render_mode: str | None = None,
+                 size: int = 240) -> TwinEnv:
+        """The task in the MuJoCo twin (:class:`lfdt.twin.env.TwinEnv`); ``config``: the twin's settings."""
+        from lfdt.twin.env import TwinEnv
+
+        return TwinEnv(self.name, domain, config, render_mode, size)
 
     def plane_angle(self, quat: np.ndarray) -> float:
         """In-plane angle (rad, wrapped to [-pi, pi)) of a body's orientation quaternion (w, x, y, z)."""

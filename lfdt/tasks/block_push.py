@@ -91,3 +91,7 @@ class BlockPush(PlanarTask):
         r2 = {"port": "/dev/ttyUSB1", "base": {"x_mm": 60.0, "y_mm": -55.0, "z_mm": 0.0, "yaw_deg": 90.0},
               "workspace_min_mm": [140.0, -90.0, 90.0], "workspace_max_mm": [240.0, 50.0, 110.0]}
         return r1, r2, {"x_mm": 0.0, "y_mm": 300.0, "z_mm": 0.0}, {"goal_line_m": 0.20}
+
+
+TASK = BlockPush()
+"""The registry's entry (:data:`lfdt.tasks.registry.TASKS`)."""

@@ -111,3 +111,7 @@ class PegInsertion(PlanarTask):
         r1 = {"host": "192.168.1.11", "base": {"x_mm": 305.0, "y_mm": 0.0, "z_mm": -15.0, "yaw_deg": 180.0}}
         r2 = {"host": "192.168.1.12", "base": {"x_mm": -275.0, "y_mm": 0.0, "z_mm": -15.0, "yaw_deg": 0.0}}
         return r1, r2, {"x_mm": 0.0, "y_mm": 150.0, "z_mm": 150.0, "roll_deg": 90.0}, {}
+
+
+TASK = PegInsertion()
+"""The registry's entry (:data:`lfdt.tasks.registry.TASKS`)."""

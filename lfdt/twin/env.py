@@ -25,7 +25,8 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from lfdt import layout, tasks
+from lfdt import layout
+from lfdt.tasks import registry
 from lfdt.tasks.base import PlanarTask
 
 
@@ -58,7 +59,7 @@ class TwinEnv(gym.Env):
                  size: int = 240):
         if domain not in layout.DOMAINS:
             raise ValueError(f"unknown domain {domain!r}; expected one of {layout.DOMAINS}")
-        self.task_def: PlanarTask = tasks.get(task)
+        self.task_def: PlanarTask = registry.get(task)
         self.task, self.domain, self.cfg = task, domain, cfg or TwinConfig()
         self.layout = self.task_def.layout
         self.arms = layout.DOMAIN_ARMS[domain]

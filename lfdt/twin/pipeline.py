@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfdt import bc, data, layout, tasks, translation
+from lfdt import bc, data, layout, translation
 from lfdt.config import TwinParams
 from lfdt.dynamics import fit_dynamics, load_random_y
 from lfdt.nets import save_state
+from lfdt.tasks import registry
 from lfdt.twin import METHODS
 from lfdt.twin.env import TwinConfig, TwinEnv
 
@@ -32,7 +33,7 @@ from lfdt.twin.env import TwinConfig, TwinEnv
 def twin_schema(task: str, domain: str, kind: str, metadata: dict):
     """The Parquet schema of twin and robot recordings (the same conventions as the simulated experiment's data):
     'random' records both slots' relative targets, 'demos' only the robot's."""
-    tl = tasks.get(task).layout
+    tl = registry.get(task).layout
     if kind == "random":
         actions = tl.action_columns(domain)
     else:
@@ -103,7 +104,7 @@ def evaluate_policy(task: str, policy, trials: int, cfg: TwinConfig | None = Non
     from lfdt.evaluation import rollout_trials
 
     def make_env(record: bool) -> TwinEnv:
-        return TwinEnv(task, "Y", cfg, render_mode="rgb_array" if record else None)
+        return registry.get(task).make_env("Y", cfg, "rgb_array" if record else None)
 
     results = rollout_trials(policy, make_env, trials, videos, video_dir, purpose=purpose)
     for r in results:
@@ -144,7 +145,7 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path) -> dict:
         else:
             stats[name] = record_demos(task, name.split("_")[1], p.demos_per_pairing, seed, path)
         kind, domain = name.split("_")
-        data.check_transitions(path, kind, domain, tasks.get(task).layout)
+        data.check_transitions(path, kind, domain, registry.get(task).layout)
         df = data.read_transitions(path)
         stats.setdefault(name, {}).update({"transitions": len(df), "episodes": int(df.episode_index.nunique())})
     return stats
@@ -154,7 +155,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
           log: Callable[[dict, int], None] | None = None, device: str | torch.device = "cpu") -> dict:
     """Fit F, F^-1, the translator, BC on the translation (lfdt) and BC on the raw demonstrations, all with one
     seed on ``device``, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
-    tl = tasks.get(task).layout
+    tl = registry.get(task).layout
     rec = recordings(task, seed, root)
     models_dir = Path(models_dir)
     ry = load_random_y(rec["random_Y"], tl)
@@ -201,7 +202,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
 
 def load_policy(task: str, method: str, models_dir: str | Path) -> bc.BCPolicy:
     """A trained twin policy (target end positions of both robots from the Y state)."""
-    policy, _ = bc.BCPolicy.load(Path(models_dir) / method, tasks.get(task).layout, action_bounds=None)
+    policy, _ = bc.BCPolicy.load(Path(models_dir) / method, registry.get(task).layout, action_bounds=None)
     return policy
 
 

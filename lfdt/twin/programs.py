@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lfdt import layout, tasks
+from lfdt import layout
+from lfdt.tasks import registry
 from lfdt.twin.env import TwinEnv
 
 PROGRAMMED_SPEED = 0.045
@@ -24,7 +25,7 @@ class ProgrammedMotion:
                  goal_line: float | None = None):
         self.task, self.dt = task, control_dt
         self.start = obs[2 * robot_slot:2 * robot_slot + 2].copy()
-        self.waypoint = tasks.get(task).program_waypoint(robot_slot, self.start, obs, goal_line)
+        self.waypoint = registry.get(task).program_waypoint(robot_slot, self.start, obs, goal_line)
         self.t = 0
 
     def next_target(self) -> np.ndarray:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfdt.envs import BoxPushEnv, jacobian
+from lfdt.tasks.box_push.env import BoxPushEnv, jacobian
 
 
 @dataclass
@@ -37,7 +37,7 @@ class ScriptedPush:
         return slice(0, n1), slice(n1, n1 + n2)
 
     def _ee(self, env: BoxPushEnv, i: int) -> np.ndarray:
-        from lfdt.envs import forward_kinematics
+        from lfdt.tasks.box_push.env import forward_kinematics
 
         return forward_kinematics(env.scene.arms[i], env.data.qpos[self._q_slices(env)[i]])
 

@@ -26,7 +26,7 @@ from gymnasium import spaces
 
 from lfdt import layout
 from lfdt.config import EnvConfig, ProgramConfig, RobotProgramConfig
-from lfdt.envs import ArmSpec, BoxPushEnv, arm_specs, forward_kinematics, jacobian
+from lfdt.tasks.box_push.env import ArmSpec, BoxPushEnv, arm_specs, forward_kinematics, jacobian
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 Two demonstration protocols (``demos.protocol``):
 
 * ``programmed_robot`` (the paper's, default): the pairing's robot replays a motion programmed in
-  advance (:mod:`lfdt.programmed`) and one stable-baselines3 SAC policy controls only the human
+  advance (:mod:`lfdt.tasks.box_push.programmed`) and one stable-baselines3 SAC policy controls only the human
   stand-in, seeing the whole state: the coordination lives in the human;
 * ``joint_expert``: one SAC policy controls both arms of a pairing, so the robot's recorded actions
   are themselves coordinated.
@@ -40,9 +40,10 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from lfdt import data, layout
 from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig, ProgramConfig
-from lfdt.envs import BoxPushEnv
-from lfdt.programmed import ProgrammedPartnerEnv
 from lfdt.seeding import episode_seed, seed_everything
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push.env import BoxPushEnv
+from lfdt.tasks.box_push.programmed import ProgrammedPartnerEnv
 
 _BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -278,8 +279,8 @@ def save_expert(model: SAC, out_dir: Path, pairing: str, env_cfg: EnvConfig, cfg
         "pairing": pairing, "algorithm": "SAC (stable-baselines3)", "env_id": f"lfdt/BoxPush-{pairing}-v0",
         **protocol_doc(demos_cfg),
         "controls": "the human stand-in only (the robot replays its program)" if human_only else "both arms",
-        "observation_columns": layout.state_columns(pairing),
-        "action_columns": layout.arm_action_columns("h") if human_only else layout.action_columns(pairing),
+        "observation_columns": box_layout.state_columns(pairing),
+        "action_columns": box_layout.arm_action_columns("h") if human_only else box_layout.action_columns(pairing),
         "env": env_cfg.model_dump(), "experts": cfg.model_dump(),
         "config_hash": config_hash(pairing, env_cfg, cfg, demos_cfg), **extra,
     }
@@ -350,7 +351,7 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
     env = make_env(pairing, env_cfg, cfg)
     robot = layout.robot_arm(pairing)
     slot_of_robot = 0 if robot == "r1" else 1
-    n_first = layout.ARM_JOINTS[layout.DOMAIN_ARMS[pairing][0]]
+    n_first = box_layout.ARM_JOINTS[layout.DOMAIN_ARMS[pairing][0]]
     robot_sl = slice(0, n_first) if slot_of_robot == 0 else slice(n_first, None)
     human_sl = slice(n_first, None) if slot_of_robot == 0 else slice(0, n_first)
     kept, attempts, lengths = [], 0, []
@@ -366,12 +367,12 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
             lengths.append(ep["length"])
             if progress:
                 progress()
-    state_cols = layout.state_columns(pairing)
+    state_cols = box_layout.state_columns(pairing)
     schema = data.transitions_schema(
-        state_cols, layout.arm_action_columns(robot), layout.arm_action_columns("h"),
+        state_cols, box_layout.arm_action_columns(robot), box_layout.arm_action_columns("h"),
         extra={"attempt_index": (pa.int64(), "which expert attempt (reset seed index) this demonstration came from"),
                "next.success": (pa.bool_(), "the task is solved at frame t+1 (true only on the last frame)")},
-        metadata={"kind": "demos", "domain": pairing, "seed": cfg.seed, "layout": layout.describe(),
+        metadata={"kind": "demos", "domain": pairing, "seed": cfg.seed, "layout": box_layout.describe(),
                   "env": env_cfg.model_dump(), "demos": cfg.model_dump(), "robot": robot,
                   "protocol": cfg.protocol,
                   "description": f"successful demonstrations of pairing {pairing} ({cfg.protocol} protocol); the "

@@ -10,7 +10,7 @@ the workspace and the box gets pushed, not only jittered.
 
 Simulation goes through ``mujoco.rollout`` on all threads: the controls of a whole batch of
 episodes are drawn first (open loop), then MuJoCo steps them in C. The resulting states are the
-same as stepping :class:`lfdt.envs.BoxPushEnv` (``tests/test_random_motion.py``).
+same as stepping :class:`lfdt.tasks.box_push.env.BoxPushEnv` (``tests/test_random_motion.py``).
 """
 
 from __future__ import annotations
@@ -23,10 +23,11 @@ import mujoco.rollout
 import numpy as np
 import pyarrow as pa
 
-from lfdt import data, layout
+from lfdt import data
 from lfdt.config import EnvConfig, RandomConfig
-from lfdt.envs import BoxPushModel
 from lfdt.seeding import episode_seed
+from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push.env import BoxPushModel
 
 
 def random_commands(rng: np.random.Generator, steps: int, act_dim: int, cfg: RandomConfig) -> np.ndarray:
@@ -88,11 +89,11 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
     """Collect ``cfg.transitions`` random-motion transitions in ``domain``; returns the table and stats."""
     scene = BoxPushModel(domain, env_cfg)
     n_episodes = -(-cfg.transitions // cfg.episode_steps)
-    state_cols = layout.state_columns(domain)
+    state_cols = box_layout.state_columns(domain)
     schema = data.transitions_schema(
-        state_cols, layout.action_columns(domain),
+        state_cols, box_layout.action_columns(domain),
         metadata={
-            "kind": "random", "domain": domain, "seed": cfg.seed, "layout": layout.describe(),
+            "kind": "random", "domain": domain, "seed": cfg.seed, "layout": box_layout.describe(),
             "env": env_cfg.model_dump(), "random": cfg.model_dump(),
             "action_distribution": "uniform in [-amplitude, amplitude] per joint, held for "
                                    "U{hold_min..hold_max} control steps",
