@@ -8,9 +8,13 @@ feeds them straight to these models.
 * F^-1(y_t, y_t+1) = g([y_t, (y_t+1 - y_t) / delta_scale])  predicts the action,
 
 where ``delta_scale`` is the per-dimension standard deviation of normalised one-step changes, so
-both nets see and produce quantities of unit scale. F's loss is measured in these units too: in
-plain normalised units the box, which moves in a minority of random-motion transitions, would
-weigh almost nothing next to the joint velocities, and its contact dynamics would go unlearnt.
+both nets see and produce quantities of unit scale. Actions are used as recorded, or (``action_scale:
+normalised``) z-scored by the random motion's action statistics: the twin's actions are targets a few millimetres
+away, and an F^-1 that outputs metres learns them only to about a millimetre.
+
+F's loss is measured in units of one-step change too: in plain normalised units the box, which moves in a
+minority of random-motion transitions, would weigh almost nothing next to the joint velocities, and its contact
+dynamics would go unlearnt.
 """
 
 from __future__ import annotations
@@ -33,20 +37,29 @@ from lfdt.nets import Normalizer, batches, check_finite, mlp
 class DynamicsModels(nn.Module):
     """The normaliser of y, the forward model F and the inverse model F^-1, saved as one state dict."""
 
-    def __init__(self, y_dim: int, a_dim: int, hidden: list[int], slope: float = 0.2):
+    def __init__(self, y_dim: int, a_dim: int, hidden: list[int], slope: float = 0.2,
+                 normalise_actions: bool = False):
         super().__init__()
         self.y_norm = Normalizer(np.zeros(y_dim), np.ones(y_dim))
         self.register_buffer("delta_scale", torch.ones(y_dim))
         self.f = mlp(y_dim + a_dim, y_dim, hidden, slope)
         self.g = mlp(2 * y_dim, a_dim, hidden, slope)
+        # only with action_scale 'normalised', so that models fit on raw actions keep their state dicts unchanged
+        self.a_norm = Normalizer(np.zeros(a_dim), np.ones(a_dim)) if normalise_actions else None
 
     def forward_model(self, y_n: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-        """F: next normalised state from a normalised state and an action."""
-        return y_n + self.delta_scale * self.f(torch.cat([y_n, a], dim=-1))
+        """F: next normalised state from a normalised state and an action (in the units it was recorded in)."""
+        a_in = a if self.a_norm is None else self.a_norm(a)
+        return y_n + self.delta_scale * self.f(torch.cat([y_n, a_in], dim=-1))
 
     def inverse_model(self, y_n: torch.Tensor, y2_n: torch.Tensor) -> torch.Tensor:
-        """F^-1: the action that takes normalised state y_n to y2_n."""
-        return self.g(torch.cat([y_n, (y2_n - y_n) / self.delta_scale], dim=-1))
+        """F^-1: the action (in the units it was recorded in) that takes normalised state y_n to y2_n."""
+        out = self.g(torch.cat([y_n, (y2_n - y_n) / self.delta_scale], dim=-1))
+        return out if self.a_norm is None else self.a_norm.inverse(out)
+
+
+ACTION_STD_FLOOR = 1e-4
+"""Floor on an action's standard deviation with ``action_scale: normalised`` (0.1 mm for the twin's targets)."""
 
 
 @dataclass
@@ -90,7 +103,8 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
     train, val = split_episodes(d.episode, cfg.val_fraction, cfg.seed)
-    models = DynamicsModels(d.y.shape[1], d.a.shape[1], list(cfg.hidden))
+    models = DynamicsModels(d.y.shape[1], d.a.shape[1], list(cfg.hidden),
+                            normalise_actions=cfg.action_scale == "normalised")
     norm = Normalizer.fit(d.y[train], cfg.std_floor, d.state_columns)
     models.y_norm.load_state_dict(norm.state_dict())
     with torch.no_grad():
@@ -107,6 +121,9 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     opt_g = torch.optim.Adam(models.g.parameters(), lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(cfg.seed)
     a_mean = a[tr_idx.to(device)].mean(dim=0)
+    if models.a_norm is not None:
+        models.a_norm.mean.copy_(a_mean)
+        models.a_norm.std.copy_(torch.clamp(a[tr_idx.to(device)].std(dim=0), min=ACTION_STD_FLOOR))
 
     def held_out() -> dict:
         with torch.no_grad():
@@ -141,7 +158,8 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
         opt_f.zero_grad(set_to_none=True)
         loss_f.backward()
         opt_f.step()
-        loss_g = ((models.inverse_model(yb, y2b) - ab) ** 2).mean()
+        err_g = models.inverse_model(yb, y2b) - ab
+        loss_g = ((err_g if models.a_norm is None else err_g / models.a_norm.std) ** 2).mean()
         opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         opt_g.step()
@@ -182,5 +200,6 @@ def load_models(path) -> DynamicsModels:
     missing = [k for k in ("state_columns", "action_columns") if not cfg.get(k)]
     if missing:  # the sizes come from the saved layout, never from a task assumed here
         raise StageError(f"{path}: its config names no {' or '.join(missing)}; refit it (`dvc repro fit_dynamics`)")
-    return load_state(DynamicsModels(len(cfg["state_columns"]), len(cfg["action_columns"]), cfg["dynamics"]["hidden"]),
-                      path)
+    models = DynamicsModels(len(cfg["state_columns"]), len(cfg["action_columns"]), cfg["dynamics"]["hidden"],
+                            normalise_actions=cfg["dynamics"].get("action_scale", "raw") == "normalised")
+    return load_state(models, path)

@@ -151,7 +151,7 @@ class Translator(nn.Module):
     """G, D and the X normalisers of both pairings, saved as one state dict."""
 
     def __init__(self, hidden: list[int], tl: TaskLayout, slope: float = 0.2,
-                 kinematics: Kinematics | None = None, d_cols: list[int] | None = None):
+                 kinematics: Kinematics | None = None, d_cols: list[int] | None = None, hand_offset: bool = False):
         super().__init__()
         x_dim = len(tl.canonical_x_columns("R1H"))
         y_dim = len(tl.state_columns("Y"))
@@ -185,6 +185,23 @@ class Translator(nn.Module):
         self.register_buffer("hand_dst", torch.zeros(n_p, 2, dtype=torch.long))
         self.register_buffer("hand_scale", torch.ones(n_p, 2))
         self.register_buffer("hand_offset", torch.zeros(n_p, 2))
+        # hand_offset: a constant offset per pairing between the hand and the missing robot's end, trained with G
+        # (Y's normalised units); only then, so that translators without it keep their state dicts unchanged
+        self.hand_shift = nn.Parameter(torch.zeros(n_p, 2)) if hand_offset else None
+
+    def generator_parameters(self) -> list[nn.Parameter]:
+        """What G's optimiser trains: G's weights, and the learnt hand offset where there is one."""
+        return [*self.G.parameters(), *([] if self.hand_shift is None else [self.hand_shift])]
+
+    def hand_offset_m(self, tl: TaskLayout) -> dict[str, float]:
+        """The learnt hand offset in metres (the missing robot's end minus the hand), keyed by the missing robot's
+        Y column; empty without one."""
+        if self.hand_shift is None:
+            return {}
+        cols = tl.state_columns("Y")
+        shift = self.hand_shift.detach() * self.y_std[self.hand_dst]
+        return {cols[int(j)]: float(shift[i, k]) for i in PAIRING_INDEX.values()
+                for k, j in enumerate(self.hand_dst[i])}
 
     def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor,
                  x_prev_n: torch.Tensor | None = None) -> torch.Tensor:
@@ -378,6 +395,8 @@ class _Losses:
         l_id = ((y_robot - x[:, :self.n_robot]) ** 2).mean()
         tr = self.tr
         hand = torch.gather(x, 1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]
+        if tr.hand_shift is not None:
+            hand = hand + tr.hand_shift[pidx]
         l_hand = ((torch.gather(y_hat, 1, tr.hand_dst[pidx]) - hand) ** 2).mean()
         return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq,
                 "dyn": (dyn_sq * self.dyn_weight).mean(),
@@ -433,7 +452,7 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
     y_cols = tl.state_columns("Y")
     d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
     tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
-                    d_cols=d_cols)
+                    d_cols=d_cols, hand_offset=cfg.hand_offset)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
@@ -501,7 +520,7 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
     demo_s, rand_s = _Sampler(demos, tr, gen, device), _Sampler(random_x, tr, gen, device)
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random, device=device))
-    opt_g = torch.optim.Adam(tr.G.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
+    opt_g = torch.optim.Adam(tr.generator_parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     opt_d = torch.optim.Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
     losses = _Losses(tr, dyn, cfg, tl)
@@ -567,14 +586,18 @@ def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Tran
             point = point or {}
             point.update({"heldout/selection_loss": sel, "heldout/dyn": float(h["dyn"]), "heldout/id": float(h["id"])})
             if sel < best[0]:
-                best = (sel, {k: v.clone() for k, v in tr.G.state_dict().items()}, it)
+                shift = None if tr.hand_shift is None else tr.hand_shift.detach().clone()
+                best = (sel, ({k: v.clone() for k, v in tr.G.state_dict().items()}, shift), it)
         if point is not None:
             curve.append({"iteration": it, **point})
             if log:
                 log(point, it)
     wall = time.perf_counter() - t0
     if best[1] is not None:
-        tr.G.load_state_dict(best[1])
+        tr.G.load_state_dict(best[1][0])
+        if tr.hand_shift is not None:
+            with torch.no_grad():
+                tr.hand_shift.copy_(best[1][1])
     final = {k: v for k, v in (curve[-1] if curve else {}).items() if k != "iteration"}
     return tr.eval(), {"wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve,
                        "final": final, "selected_iteration": best[2] if best[1] is not None else cfg.iterations,

@@ -1,6 +1,7 @@
 """DVC stage: dynamics, translator and BC (LfDT and BC without translation) for one real-robot task."""
 
 from lfdt import mlflow_runs, stage
+from lfdt.errors import StageError
 from lfdt.nets import torch_device
 from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
@@ -11,7 +12,12 @@ def run() -> None:
         "data-dir": "the recordings, a folder per task", "models": "where the models go, a folder per task",
         "reports": "where the report <task>_train.json goes"})
     task, p, device = args.task, all_params.twin, torch_device(all_params.device)
-    params = {"twin": {k: v for k, v in p.model_dump().items() if k in ("seeds", "dynamics", "translator", "bc")},
+    unknown = sorted(set(p.task_translator) - set(registry.PLANAR))
+    if unknown:
+        raise StageError(f"params.yaml twin.task_translator: unknown task(s) {unknown}; the tasks are "
+                               f"{list(registry.PLANAR)}")
+    params = {"twin": {"seeds": p.seeds, "dynamics": p.dynamics.model_dump(),
+                       "translator": p.translator_for(task).model_dump(), "bc": p.bc.model_dump()},
               "device": all_params.device}
     # one MLflow run per seed, as the matrix stages' jobs: the stage's frame opens none
     with stage.frame(args.reports / f"{task}_train.json") as f:

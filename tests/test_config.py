@@ -102,3 +102,13 @@ def test_stage_stops_before_compute_with_named_key(tmp_path):
     assert proc.returncode == 2
     assert "random.transitions = -3" in proc.stderr
     assert not (tmp_path / "data").exists() and not (tmp_path / "mlflow.db").exists()
+
+
+def test_a_twin_task_can_change_its_translator_settings():
+    p = validate_params({"twin": {"task_translator": {"block_push": {"hand_offset": True, "iterations": 50}}}}).twin
+    assert p.translator_for("block_push").hand_offset and p.translator_for("block_push").iterations == 50
+    assert not p.translator_for("peg_insertion").hand_offset and p.translator_for("peg_insertion") == p.translator
+    with pytest.raises(ParamsError, match="hand_ofset"):
+        validate_params({"twin": {"task_translator": {"block_push": {"hand_ofset": True}}}})
+    with pytest.raises(ParamsError, match=r"task_translator.block_push: kinematics = 'forward'"):
+        validate_params({"twin": {"task_translator": {"block_push": {"kinematics": "forward"}}}})

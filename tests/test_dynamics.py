@@ -6,7 +6,7 @@ import torch
 
 from lfdt import data
 from lfdt.config import DynamicsConfig, EnvConfig, RandomConfig
-from lfdt.dynamics import DynamicsModels, fit_dynamics, load_models, load_random_y, split_episodes
+from lfdt.dynamics import DynamicsModels, RandomY, fit_dynamics, load_models, load_random_y, split_episodes
 from lfdt.errors import StageError
 from lfdt.nets import load_state, save_state
 from lfdt.tasks.box_push.layout import BOX_PUSH
@@ -56,3 +56,36 @@ def test_load_models_takes_its_sizes_from_the_saved_layout(tmp_path):
     save_state(models, tmp_path / "old.pt", {"dynamics": cfg.model_dump()})
     with pytest.raises(StageError, match=r"old\.pt.*state_columns or action_columns"):
         load_models(tmp_path / "old.pt")
+
+
+def test_normalised_actions_learn_millimetre_targets_and_round_trip(tmp_path):
+    # a position servo: the end moves 0.7 of its target (a few millimetres) per step, as in the twin
+    rng = np.random.default_rng(0)
+    n = 3_000
+    y = rng.uniform(-0.05, 0.05, (n, 4)).astype(np.float32)
+    a = rng.uniform(-0.008, 0.008, (n, 2)).astype(np.float32)
+    y2 = y.copy()
+    y2[:, :2] += 0.7 * a
+    d = RandomY(y=y, a=a, y2=y2, episode=np.repeat(np.arange(n // 30), 30),
+                state_columns=[f"s{i}" for i in range(4)], action_columns=["a0", "a1"])
+    cfg = DynamicsConfig(hidden=[64, 64], iterations=1_500, eval_every=500, batch_size=64, action_scale="normalised")
+    models, res = fit_dynamics(d, cfg)
+    assert res["inverse_ratio"] < 0.02 and res["forward_ratio"] < 0.02
+    torch.testing.assert_close(models.a_norm.std, torch.from_numpy(a).std(dim=0), rtol=0.05, atol=0)
+    # F^-1 answers in the units the actions were recorded in
+    y_n = models.y_norm(torch.from_numpy(y[:200]))
+    y2_n = models.y_norm(torch.from_numpy(y2[:200]))
+    with torch.no_grad():
+        err = (models.inverse_model(y_n, y2_n) - torch.from_numpy(a[:200])).abs().max()
+    assert float(err) < 0.002
+    cols = {"state_columns": d.state_columns, "action_columns": d.action_columns}
+    save_state(models, tmp_path / "dyn.pt", {"dynamics": cfg.model_dump(), **cols})
+    again = load_models(tmp_path / "dyn.pt")
+    torch.testing.assert_close(again.inverse_model(y_n, y2_n), models.inverse_model(y_n, y2_n))
+    torch.testing.assert_close(again.forward_model(y_n, torch.from_numpy(a[:200])),
+                               models.forward_model(y_n, torch.from_numpy(a[:200])))
+
+
+def test_raw_actions_keep_the_state_dict_of_before():
+    assert not any(k.startswith("a_norm") for k in DynamicsModels(7, 4, [8]).state_dict())
+    assert {"a_norm.mean", "a_norm.std"} <= set(DynamicsModels(7, 4, [8], normalise_actions=True).state_dict())

@@ -259,3 +259,31 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
         monkeypatch.setattr(translation.Translator, "disc", orig)
         # per iteration: D on real + fakes, then L_adv on the fakes
         assert sizes[:2] == [2 * fakes, fakes]
+
+
+def test_hand_offset_is_learnt_with_g_and_only_when_asked_for(tiny):
+    env, paths, dyn = tiny
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    cfg = TranslatorConfig(iterations=200, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
+                           lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
+    plain, _ = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
+                                            tl=TL)
+    assert "hand_shift" not in plain.state_dict() and plain.hand_offset_m(TL) == {}
+    tr, _ = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
+                                         cfg.model_copy(update={"hand_offset": True}), seed=0, tl=TL)
+    assert "hand_shift" in tr.state_dict() and any(p is tr.hand_shift for p in tr.generator_parameters())
+    assert float(tr.hand_shift.detach().abs().max()) > 0  # trained with G
+    offsets = tr.hand_offset_m(TL)
+    missing_ends = [c for p in layout.PAIRINGS for c in TL.position_cols["r2" if layout.robot_arm(p) == "r1" else "r1"]]
+    assert sorted(offsets) == sorted(missing_ends)
+    # the loss compares with the hand plus the offset: the mean difference in a batch lowers it
+    losses = translation._Losses(tr, dyn, cfg, TL)
+    batch = translation._normalised(tr, random_x)
+    with torch.no_grad():
+        tr.hand_shift.zero_()
+        out = losses(*batch)
+        hand = torch.gather(batch[1], 1, tr.hand_src[batch[3]]) * tr.hand_scale[batch[3]] + tr.hand_offset[batch[3]]
+        diff = torch.gather(out["y_hat"], 1, tr.hand_dst[batch[3]]) - hand
+        for i in range(len(layout.PAIRINGS)):
+            tr.hand_shift[i] = diff[batch[3] == i].mean(dim=0)
+        assert float(losses(*batch)["hand"]) < float(out["hand"])

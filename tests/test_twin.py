@@ -118,3 +118,25 @@ def test_recorder_writes_only_finished_episodes(tmp_path):
     rec.add(np.zeros(7), np.zeros(4), np.ones(7))  # never finished: nothing on disk
     assert sorted(p.name for p in tmp_path.glob("*.parquet")) == [first.name]
     assert rec.next_index() == 1
+
+
+def test_random_motion_of_block_push_starts_along_the_push():
+    from lfdt.robot.sim_rig import SimRig
+    from lfdt.tasks.block_push import RANDOM_MOTION_ADVANCE
+
+    env = TwinEnv("block_push", "Y")
+    advances = []
+    for seed in range(30):
+        start, _ = env.reset(seed=seed)
+        moved, _ = env.reset(seed=seed, options={"random_motion": True})
+        advance = moved[5] - start[5]  # obj.y
+        np.testing.assert_allclose(moved[[1, 3]] - start[[1, 3]], advance, atol=1e-9)  # both ends moved with it
+        np.testing.assert_allclose(moved[[0, 2, 4, 6]], start[[0, 2, 4, 6]], atol=1e-9)
+        advances.append(advance)
+    assert 0 <= min(advances) and max(advances) <= RANDOM_MOTION_ADVANCE and np.std(advances) > 0.02
+    # the random person's rig records random motion, so it starts there; the scripted person's does not
+    with SimRig("block_push", "R1H", human="random") as rig, SimRig("block_push", "R1H") as demo_rig:
+        assert rig.reset(seed=3)[5] > demo_rig.reset(seed=3)[5]
+    # a task that says nothing starts its random motion where its episodes start
+    peg = TwinEnv("peg_insertion", "Y")
+    np.testing.assert_array_equal(peg.reset(seed=4)[0], peg.reset(seed=4, options={"random_motion": True})[0])

@@ -44,7 +44,8 @@ class SimRig(Rig):
 
         if seed is None:
             seed = int(self._seeds.integers(2**31))
-        self._obs, self._info = self.env.reset(seed=seed)
+        # the random person ("random") records random motion, which starts where the task says it should
+        self._obs, self._info = self.env.reset(seed=seed, options={"random_motion": self.human == "random"})
         self._over = False
         self._demo = TwinDemonstrator(self.env) if self.human_slot is not None and self.human == "scripted" else None
         return self._obs.copy()

@@ -129,6 +129,12 @@ class PlanarTask(Task, ABC):
     def reset(self, env: TwinEnv, rng: np.random.Generator) -> list[np.ndarray]:
         """Place the object for a new episode and return each slot's start end position (plane, m)."""
 
+    def random_motion_start(self, env: TwinEnv, rng: np.random.Generator) -> list[np.ndarray]:
+        """Like :meth:`reset`, for an episode of random motion (the task's start state by default; a task whose
+        demonstrations travel far from it starts its random motion along the way, so that F and F^-1 see those
+        states too)."""
+        return self.reset(env, rng)
+
     def settle(self, env: TwinEnv) -> None:  # noqa: B027 (optional hook: most tasks need nothing)
         """Let the scene settle after a reset (nothing by default)."""
 

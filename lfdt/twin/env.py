@@ -92,7 +92,9 @@ class TwinEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         mujoco.mj_resetData(self.model, self.data)
-        starts = self.task_def.reset(self, self.np_random)
+        # options {"random_motion": True}: the task's start of a random-motion episode
+        start = self.task_def.random_motion_start if (options or {}).get("random_motion") else self.task_def.reset
+        starts = start(self, self.np_random)
         for i, a in enumerate(self.arms):
             self._place(i, a, starts[i])
         self._setpoints = np.array(starts)

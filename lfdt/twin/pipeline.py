@@ -171,7 +171,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
              for pr in layout.PAIRINGS}
     random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl=tl, kind="random")
                 for pr in layout.PAIRINGS}
-    cfg = translation.method_config("lfdt", p.translator)
+    cfg = translation.method_config("lfdt", p.translator_for(task))
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
     trs, all_stats = translation.train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
                                                 std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device)
@@ -186,7 +186,8 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     diag = translation.translation_diagnostics(translated, demo_paths, episodes, tl)
     raw = {pr: data.read_transitions(path, kind="demos", domain=pr, task=task) for pr, path in demo_paths.items()}
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
-           "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag}}
+           "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag,
+                          **{f"hand_offset_m/{c}": v for c, v in trs[0].hand_offset_m(tl).items()}}}
     for method in METHODS:
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         members = []
