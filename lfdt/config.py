@@ -521,10 +521,19 @@ class TwinParams(Strict):
     (README, twin development)."""
     bc: BCConfig = BCConfig(iterations=4_000)
     """Behaviour cloning on the twin."""
+    task_bc: dict[str, dict[str, Any]] = Field(default={})
+    """Changes to bc for one task (task -> bc fields), as task_translator does for the translator."""
+    start_states: Literal["evaluation", "development"] = "evaluation"
+    """Seed block of the twin's trial start states: 'evaluation' (the reported results) or 'development' (a disjoint
+    block for choosing settings, with twin seeds 0-2 and 6-8: `dvc exp run -S twin.start_states=development`)."""
 
     def translator_for(self, task: str) -> TranslatorConfig:
         """The translator settings of one task: ``translator`` with the task's entry of ``task_translator``."""
         return TranslatorConfig.model_validate({**self.translator.model_dump(), **self.task_translator.get(task, {})})
+
+    def bc_for(self, task: str) -> BCConfig:
+        """The BC settings of one task: ``bc`` with the task's entry of ``task_bc``."""
+        return BCConfig.model_validate({**self.bc.model_dump(), **self.task_bc.get(task, {})})
 
     @model_validator(mode="after")
     def _learned_kinematics(self) -> TwinParams:
@@ -540,6 +549,8 @@ class TwinParams(Strict):
             if cfg.kinematics != "learned":
                 raise ValueError(f"{where}: kinematics = {cfg.kinematics!r}: the twin's states are end positions with "
                                  "no joint angles, so G must output them ('learned')")
+        for task in self.task_bc:
+            self.bc_for(task)  # validates the task's entry
         return self
 
 

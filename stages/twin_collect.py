@@ -1,6 +1,8 @@
 """DVC stage: random motion and demonstrations of one real-robot task, from the twin or from robot recordings."""
 
-from lfdt import stage
+import shutil
+
+from lfdt import parallel, stage
 from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
 
@@ -12,7 +14,11 @@ def run() -> None:
     with stage.frame(args.reports / f"{task}_data.json", "twin_collect", {"twin": p.model_dump()},
                      tags={"task": task, "seeds": ",".join(map(str, p.seeds)), "backend": p.backend},
                      run_name=f"{task} twin_collect") as f:
-        stats = twin_pipeline.collect(task, p, args.data_dir)
+        shutil.rmtree(args.data_dir / task, ignore_errors=True)
+        jobs = [twin_pipeline.SeedJob(task, seed, str(args.params), data_root=str(args.data_dir)) for seed in p.seeds]
+        per_seed = parallel.run_jobs(twin_pipeline.collect_job, jobs, all_params.grid.workers, total=len(jobs),
+                                     desc=f"twin_collect {task}", unit="seed")
+        stats = {f"s{j.seed}": s for j, s in zip(jobs, per_seed, strict=True)}
         f.metrics({f"{s}/{k}/{kk}": vv for s, per in stats.items() for k, v in per.items() for kk, vv in v.items()})
         f.report.update({"task": task, "backend": p.backend, **stats})
     for s, per in stats.items():

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from lfdt import stage, twin
+from lfdt import parallel, stage, twin
 from lfdt.robot import deploy_log
 from lfdt.tasks import registry
 from lfdt.twin import pipeline as twin_pipeline
@@ -29,17 +29,25 @@ def run() -> None:
     video_root = args.videos / task
     video_root.mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos or the real robots' logs
     with stage.frame(args.reports / f"{task}_eval.json", "twin_evaluate",
-                     {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds}},
-                     tags={"task": task, "backend": p.backend}, run_name=f"{task} twin_evaluate") as f:
+                     {"twin": {"trials": p.trials, "backend": p.backend, "seeds": p.seeds,
+                               "start_states": p.start_states}},
+                     tags={"task": task, "backend": p.backend, "start_states": p.start_states},
+                     run_name=f"{task} twin_evaluate") as f:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
-            rows = twin_pipeline.evaluate(task, p, args.models / task, video_root=video_root)
+            jobs = [twin_pipeline.SeedJob(task, seed, str(args.params), models_dir=str(args.models / task / f"s{seed}"),
+                                          video_dir=str(video_root) if seed == p.seeds[0] else None)
+                    for seed in p.seeds]
+            rows = [r for per in parallel.run_jobs(twin_pipeline.evaluate_job, jobs, all_params.grid.workers,
+                                                   total=len(jobs), desc=f"twin_evaluate {task}", unit="seed")
+                    for r in per]
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}
         counts = {m: sum(r["method"] == m for r in rows) for m in twin.METHODS}
         f.metrics({f"{m}/successes": v for m, v in summary.items()})
         f.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
-        f.report.update({"task": task, "backend": p.backend, "trials": counts, "successes": summary,
+        f.report.update({"task": task, "backend": p.backend, "start_states": p.start_states, "trials": counts,
+                         "successes": summary,
                          "per_trial": rows})
     print(f"{task}: " + ", ".join(f"{m} {v}/{counts[m]}" for m, v in summary.items()))
 

@@ -25,6 +25,8 @@ def run() -> None:
     p = stage.params(args.params).twin
     rows, lines = [], []
     source = "MuJoCo twin" if p.backend == "sim" else "the robots"
+    if p.backend == "sim" and p.start_states == "development":
+        source += ", development start states: for choosing settings, not results"
     lines += [f"# Real-robot tasks ({source})", "",
               "| task | method | ours | successes | per seed | 95 % interval | paper (real robots) |",
               "| --- | --- | --- | --- | --- | --- | --- |"]

@@ -112,3 +112,19 @@ def test_a_twin_task_can_change_its_translator_settings():
         validate_params({"twin": {"task_translator": {"block_push": {"hand_ofset": True}}}})
     with pytest.raises(ParamsError, match=r"task_translator.block_push: kinematics = 'forward'"):
         validate_params({"twin": {"task_translator": {"block_push": {"kinematics": "forward"}}}})
+
+
+def test_a_twin_task_can_change_its_bc_settings():
+    p = validate_params({"twin": {"bc": {"iterations": 30}, "task_bc": {"block_push": {"input_noise": 0.2}}}}).twin
+    assert p.bc_for("block_push").input_noise == 0.2 and p.bc_for("block_push").iterations == 30
+    assert p.bc_for("peg_insertion") == p.bc
+    with pytest.raises(ParamsError, match="input_nois"):
+        validate_params({"twin": {"task_bc": {"block_push": {"input_nois": 0.1}}}})
+    with pytest.raises(ParamsError, match="input_noise"):
+        validate_params({"twin": {"task_bc": {"block_push": {"input_noise": -1.0}}}})
+
+
+def test_twin_start_states_name_a_seed_block():
+    assert validate_params({"twin": {"start_states": "development"}}).twin.start_states == "development"
+    with pytest.raises(ParamsError, match="start_states"):
+        validate_params({"twin": {"start_states": "training"}})

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import shutil
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -119,11 +120,44 @@ def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
     return {n: base / n for n in names}
 
 
+@dataclass(frozen=True)
+class SeedJob:
+    """One seed's share of a twin stage, run in a worker process (:func:`lfdt.parallel.run_jobs`): the stage's
+    params file is read again there, so that a job carries only paths."""
+
+    task: str
+    seed: int
+    params: str
+    """The stage's params.yaml."""
+    data_root: str | None = None
+    """The twin's data folder (its ``<task>/s<seed>/`` recordings)."""
+    models_dir: str | None = None
+    """This seed's models (``<models>/<task>/s<seed>/``)."""
+    video_dir: str | None = None
+    """Where this seed's rollout videos go (None: no videos)."""
+
+
+def _twin_params(job: SeedJob) -> tuple[TwinParams, str]:
+    from lfdt.stage import params
+
+    p = params(job.params)
+    return p.twin, p.device
+
+
 def collect(task: str, p: TwinParams, root: str | Path) -> dict:
-    """Write (sim) or import (real) the recordings of a task for every seed; returns statistics per seed and
-    recording."""
+    """Write (sim) or import (real) the recordings of a task for every seed, one after the other; returns statistics
+    per seed and recording (the stage runs :func:`collect_job` per seed side by side instead)."""
     shutil.rmtree(Path(root) / task, ignore_errors=True)
     return {f"s{seed}": collect_seed(task, p, seed, root) for seed in p.seeds}
+
+
+def collect_job(job: SeedJob, progress=None) -> dict:
+    """The recordings of one seed's run (:func:`collect_seed`) as a worker's job."""
+    p, _ = _twin_params(job)
+    stats = collect_seed(job.task, p, job.seed, job.data_root)
+    if progress is not None:
+        progress.update(1)
+    return stats
 
 
 def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path) -> dict:
@@ -152,9 +186,11 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path) -> dict:
 
 
 def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str | Path,
-          log: Callable[[dict, int], None] | None = None, device: str | torch.device = "cpu") -> dict:
+          log: Callable[[dict, int], None] | None = None, device: str | torch.device = "cpu",
+          progress=None) -> dict:
     """Fit F, F^-1, the translator, BC on the translation (lfdt) and BC on the raw demonstrations, all with one
-    seed on ``device``, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory)."""
+    seed on ``device``, on that seed's recordings; the models go to ``models_dir`` (the seed's own directory).
+    ``progress`` counts the translator's iterations."""
     tl = registry.get(task).layout
     rec = recordings(task, seed, root)
     models_dir = Path(models_dir)
@@ -174,7 +210,8 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     cfg = translation.method_config("lfdt", p.translator_for(task))
     train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
     trs, all_stats = translation.train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
-                                                std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device)
+                                                std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device,
+                                                progress=progress)
     for r, tr in enumerate(trs):
         save_state(tr, models_dir / ("translator.pt" if r == 0 else f"translator_r{r}.pt"),
                    {"translator": cfg.model_dump(), "task": task, "seed": seed, "restart": r,
@@ -188,17 +225,44 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
            "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag,
                           **{f"hand_offset_m/{c}": v for c, v in trs[0].hand_offset_m(tl).items()}}}
+    bcfg = p.bc_for(task)
     for method in METHODS:
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         members = []
         for t in members_data:
-            m, st = bc.train_member(t, p.bc, seed, device=device)
+            m, st = bc.train_member(t, bcfg, seed, device=device)
             members.append(m)
             out[f"bc/{method}/{t.name}"] = {k: v for k, v in st.items() if k != "curve"}
         bc.BCPolicy(members, tl, action_bounds=None).save(models_dir / method, {
-            "method": method, "task": task, "seed": seed, "bc": p.bc.model_dump(),
+            "method": method, "task": task, "seed": seed, "bc": bcfg.model_dump(),
             "members": [t.name for t in members_data]})
     return out
+
+
+def train_job(job: SeedJob, progress=None) -> dict:
+    """:func:`train` of one seed as a worker's job, in an MLflow run of its own (``twin_train``, tagged with the task
+    and seed); returns the results with the run's id."""
+    import torch
+
+    from lfdt import mlflow_runs
+    from lfdt.nets import torch_device
+    from lfdt.stage import numeric
+
+    p, device_name = _twin_params(job)
+    torch.set_num_threads(1)  # each worker one core; the models' own torch_threads apply inside
+    run_params = {"twin": {"seeds": p.seeds, "dynamics": p.dynamics.model_dump(),
+                           "translator": p.translator_for(job.task).model_dump(),
+                           "bc": p.bc_for(job.task).model_dump()},
+                  "device": device_name}
+    with mlflow_runs.stage_run("twin_train", run_params, tags={"task": job.task, "seed": job.seed},
+                               run_name=f"{job.task}-s{job.seed} twin_train") as run:
+        def log(m: dict, i: int) -> None:
+            run.metrics({f"translator/{k}": v for k, v in m.items()}, i)
+
+        res = train(job.task, p, job.seed, job.models_dir, job.data_root, log=log, device=torch_device(device_name),
+                    progress=progress)
+        run.metrics(numeric({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()}))
+        return {**res, "mlflow_run_id": run.run_id}
 
 
 def load_policy(task: str, method: str, models_dir: str | Path) -> bc.BCPolicy:
@@ -209,14 +273,35 @@ def load_policy(task: str, method: str, models_dir: str | Path) -> bc.BCPolicy:
 
 def evaluate(task: str, p: TwinParams, models_dir: str | Path, video_root: str | Path | None = None) -> list[dict]:
     """Per-trial results of both methods and every seed's policies (``models_dir/s<seed>``) in the twin's Y, all
-    from the same fixed evaluation start states; videos of the first seed's policies."""
+    from the same fixed start states of ``p.start_states``; videos of the first seed's policies. One seed after the
+    other (the stage runs :func:`evaluate_seed` per seed side by side instead)."""
+    return [r for seed in p.seeds for r in evaluate_seed(
+        task, p, seed, Path(models_dir) / f"s{seed}", video_root if seed == p.seeds[0] else None)]
+
+
+def evaluate_seed(task: str, p: TwinParams, seed: int, models_dir: str | Path,
+                  video_root: str | Path | None = None) -> list[dict]:
+    """Per-trial results of both methods with one seed's policies; ``p.videos`` videos of each under
+    ``video_root/<task>-<method>`` when it is given."""
     rows = []
     with torch.no_grad():
-        for seed in p.seeds:
-            for method in METHODS:
-                policy = load_policy(task, method, Path(models_dir) / f"s{seed}")
-                vdir = Path(video_root) / f"{task}-{method}" if video_root and seed == p.seeds[0] else None
-                for r in evaluate_policy(task, policy, p.trials, videos=p.videos if vdir else 0, video_dir=vdir):
-                    rows.append({"task": task, "method": method, "seed": seed, "trial": r["trial"],
-                                 "success": bool(r["success"]), "steps": r["steps"], "start_seed": r["seed"]})
+        for method in METHODS:
+            policy = load_policy(task, method, models_dir)
+            vdir = Path(video_root) / f"{task}-{method}" if video_root else None
+            for r in evaluate_policy(task, policy, p.trials, purpose=p.start_states,
+                                     videos=p.videos if vdir else 0, video_dir=vdir):
+                rows.append({"task": task, "method": method, "seed": seed, "trial": r["trial"],
+                             "success": bool(r["success"]), "steps": r["steps"], "start_seed": r["seed"]})
+    return rows
+
+
+def evaluate_job(job: SeedJob, progress=None) -> list[dict]:
+    """:func:`evaluate_seed` as a worker's job."""
+    import torch
+
+    p, _ = _twin_params(job)
+    torch.set_num_threads(1)
+    rows = evaluate_seed(job.task, p, job.seed, job.models_dir, job.video_dir)
+    if progress is not None:
+        progress.update(1)
     return rows
