@@ -16,7 +16,7 @@ from pathlib import Path
 
 
 def defined_stages(root: str | Path = ".") -> set[str]:
-    """Names of every stage dvc.yaml defines, matrix entries expanded (``train_bc@lfdt-100``)."""
+    """Names of every stage dvc.yaml defines, matrix entries expanded (``bc_evaluate@lfdt-100``)."""
     from dvc.repo import Repo
 
     with Repo(str(root)) as repo:

@@ -146,9 +146,10 @@ def stages() -> list[tuple[str, str, list[str], dict]]:
     out = []
     for name, st in doc["stages"].items():
         deps = [d if isinstance(d, str) else next(iter(d)) for d in st.get("deps", [])]
+        cmd = " && ".join(st["cmd"]) if isinstance(st["cmd"], list) else st["cmd"]  # a stage of several commands
         for item in matrix_items(st["matrix"]) if "matrix" in st else [{}]:
             label = name + ("@" + "-".join(map(str, item.values())) if item else "")
-            out.append((label, _expand(st["cmd"], item), [_expand(d, item) for d in deps], item))
+            out.append((label, _expand(cmd, item), [_expand(d, item) for d in deps], item))
     return out
 
 

@@ -175,7 +175,7 @@ def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smok
     exp = client.get_experiment_by_name("lfdt")
     evaluate = client.search_runs([exp.experiment_id], "tags.`lfdt.stage` = 'evaluate'", max_results=500)
     assert {r.info.run_id for r in evaluate} <= ids
-    assert len(evaluate) == sum(s.startswith("evaluate@") for s in chain_stages) * 2  # two seeds each
+    assert len(evaluate) == sum(s.startswith("bc_evaluate@") for s in chain_stages) * 2  # two seeds each
     children = client.search_runs([exp.experiment_id], f"tags.`mlflow.parentRunId` = '{parent}'", max_results=500)
     assert {r.info.run_id for r in evaluate} <= {r.info.run_id for r in children}
 

@@ -42,10 +42,10 @@ def test_plan_splits_the_dag_into_shared_independent_chains_and_final(repo):
                 assert up in plan.shared or owner.get(up) == name, (s, up)  # a chain needs only itself and shared
         order = {s: i for i, s in enumerate(stages)}
         assert all(order[b] < order[a] for a, b in g.subgraph(stages).edges)  # upstream first
-    assert {"train_experts", "fit_dynamics", "collect_demos@R1H", "collect_random@Y"} <= set(plan.shared)
-    assert {"report", "twin_report", "summarize_experts"} == set(plan.final)
+    assert {"train_experts", "fit_dynamics", "collect_demos", "collect_random"} <= set(plan.shared)
+    assert {"report", "twin_report"} == set(plan.final)
     # lfdt_track re-executes lfdt's translations: one chain; the twin of each task is one chain
-    assert {"train_translator@lfdt-50", "track_demos@50", "evaluate@lfdt_track-50"} <= \
+    assert {"train_translator@lfdt-50", "track_demos@50", "bc_evaluate@lfdt_track-50"} <= \
         set(plan.chains["train_translator@lfdt-50"])
     assert set(plan.chains["twin_collect@block_push"]) == {"twin_collect@block_push", "twin_train@block_push",
                                                            "twin_evaluate@block_push"}
