@@ -13,12 +13,15 @@ import pandas as pd
 from lfdt import methods
 from lfdt.evaluation import PAPER_TRIALS, seed_state_interval
 
-METHOD_ORDER = list(methods.METHODS)
+
+def method_order() -> list[str]:
+    """Table I's row order: the registry's (read when asked, so that a method added to it is a row too)."""
+    return list(methods.METHODS)
 
 
 def _ordered(df: pd.DataFrame) -> pd.DataFrame:
     df = df.copy()
-    df["order"] = df.method.map({m: i for i, m in enumerate(METHOD_ORDER)})
+    df["order"] = df.method.map({m: i for i, m in enumerate(method_order())})
     return df.sort_values(["order", "demos", "seed"] if "seed" in df else ["order", "demos"]).drop(columns="order")
 
 
@@ -80,7 +83,7 @@ def markdown(table: pd.DataFrame) -> str:
     head = "| method | " + " | ".join(f"{d} demos: ours | {d}: ours, first {PAPER_TRIALS} | {d}: paper"
                                      for d in demos) + " |"
     lines = [head, "| --- |" + " --- | --- | --- |" * len(demos)]
-    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
+    for m in [m for m in method_order() if m in set(table.method)]:
         cells = []
         for d in demos:
             r = table[(table.method == m) & (table.demos == d)]
@@ -113,7 +116,7 @@ def latex(table: pd.DataFrame) -> str:
     lines = [r"\begin{tabular}{l" + "rr" * len(demos) + "}", r"\toprule",
              "Method & " + " & ".join(rf"\multicolumn{{2}}{{c}}{{{d} demos}}" for d in demos) + r" \\",
              " & " + " & ".join("ours & paper" for _ in demos) + r" \\", r"\midrule"]
-    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
+    for m in [m for m in method_order() if m in set(table.method)]:
         cells = []
         for d in demos:
             r = table[(table.method == m) & (table.demos == d)]
@@ -134,7 +137,7 @@ def plot(run_rows: pd.DataFrame, table: pd.DataFrame, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8.8, 4.4), dpi=120)
-    for m in [m for m in METHOD_ORDER if m in set(table.method)]:
+    for m in [m for m in method_order() if m in set(table.method)]:
         meth = methods.get(m)
         t = table[table.method == m].sort_values("demos")
         ax.plot(t.demos, 100 * t.success_rate, "-o", color=meth.colour, label=meth.title)
@@ -180,7 +183,7 @@ def plot_translator_curves(translator_dir: Path, path: Path) -> Path:
     curves = []
     for f in Path(translator_dir).glob("*_curve.csv"):
         method, demos = _curve_config(f)
-        curves.append((METHOD_ORDER.index(method), demos, method, f))
+        curves.append((method_order().index(method), demos, method, f))
     if not curves:
         raise FileNotFoundError(f"no translator learning curves (*_curve.csv) in {translator_dir}")
     styles = ["-", "--", ":", "-."]
@@ -225,7 +228,7 @@ def headline(table: pd.DataFrame) -> dict:
 def success_by_method(table: pd.DataFrame) -> pd.DataFrame:
     """Success rate against demonstrations, one column per method (a DVC plot that overlays the methods)."""
     wide = table.pivot(index="demos", columns="method", values="success_rate")
-    return wide[[m for m in METHOD_ORDER if m in wide]].reset_index()
+    return wide[[m for m in method_order() if m in wide]].reset_index()
 
 
 def curves_by_method(curve_dir: Path, column: str, x: str = "iteration") -> pd.DataFrame:
@@ -242,7 +245,7 @@ def curves_by_method(curve_dir: Path, column: str, x: str = "iteration") -> pd.D
     if not per_method:
         raise FileNotFoundError(f"no learning curves (*_curve.csv) in {curve_dir}")
     wide = pd.DataFrame({m: pd.concat(per_method[m], axis=1).mean(axis=1)
-                         for m in METHOD_ORDER if m in per_method})
+                         for m in method_order() if m in per_method})
     wide.index.name = x
     return wide.reset_index()
 

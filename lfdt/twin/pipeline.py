@@ -242,8 +242,6 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
 def train_job(job: SeedJob, progress=None) -> dict:
     """:func:`train` of one seed as a worker's job, in an MLflow run of its own (``twin_train``, tagged with the task
     and seed); returns the results with the run's id."""
-    import torch
-
     from lfdt import mlflow_runs
     from lfdt.nets import torch_device
     from lfdt.stage import numeric
@@ -271,17 +269,10 @@ def load_policy(task: str, method: str, models_dir: str | Path) -> bc.BCPolicy:
     return policy
 
 
-def evaluate(task: str, p: TwinParams, models_dir: str | Path, video_root: str | Path | None = None) -> list[dict]:
-    """Per-trial results of both methods and every seed's policies (``models_dir/s<seed>``) in the twin's Y, all
-    from the same fixed start states of ``p.start_states``; videos of the first seed's policies. One seed after the
-    other (the stage runs :func:`evaluate_seed` per seed side by side instead)."""
-    return [r for seed in p.seeds for r in evaluate_seed(
-        task, p, seed, Path(models_dir) / f"s{seed}", video_root if seed == p.seeds[0] else None)]
-
-
 def evaluate_seed(task: str, p: TwinParams, seed: int, models_dir: str | Path,
                   video_root: str | Path | None = None) -> list[dict]:
-    """Per-trial results of both methods with one seed's policies; ``p.videos`` videos of each under
+    """Per-trial results of both methods with one seed's policies (``models_dir``) in the twin's Y, from the fixed
+    start states of ``p.start_states`` (the same for every seed); ``p.videos`` videos of each method under
     ``video_root/<task>-<method>`` when it is given."""
     rows = []
     with torch.no_grad():
@@ -297,8 +288,6 @@ def evaluate_seed(task: str, p: TwinParams, seed: int, models_dir: str | Path,
 
 def evaluate_job(job: SeedJob, progress=None) -> list[dict]:
     """:func:`evaluate_seed` as a worker's job."""
-    import torch
-
     p, _ = _twin_params(job)
     torch.set_num_threads(1)
     rows = evaluate_seed(job.task, p, job.seed, job.models_dir, job.video_dir)
