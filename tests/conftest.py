@@ -23,5 +23,7 @@ def smoke_project(tmp_path_factory) -> SmokeProject:
     import smoke
 
     dst = smoke.make_project(tmp_path_factory.mktemp("smoke"))
-    out = smoke.dvc(["repro"], dst)
+    # The timeout guards against a hang, never a speed: the smoke DAG takes about 4 minutes on a 2-core EPYC and
+    # went past 10 on a slower 2-core Xeon with the other pytest worker busy (CI of 2026-12-01).
+    out = smoke.dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
     return SmokeProject(dst, out, {t: (dst / t).read_bytes() for t in smoke.TABLES})

@@ -16,6 +16,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PROJECT_FILES = ("dvc.yaml", "lfdt", "stages", "data/real")  # data/real: the twin stages' robot-data dependency
 TABLES = ("reports/table1.csv", "reports/table1_runs.csv", "reports/twin_runs.csv")
 """What a run of the smoke params reports: a sweep of the same params must give them byte for byte."""
+REPRO_TIMEOUT_S = 2400
+"""How long a full `dvc repro` of the smoke params may take before the test calls it hung (as the sweep's 1200 s
+per chain: a guard against a hang, well inside CI's 90 minutes, never a speed test)."""
 
 
 def dvc(args: list[str], cwd: Path, timeout: float = 600) -> str:

@@ -287,7 +287,7 @@ def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(proje
     params = yaml.safe_load((dst / "params.yaml").read_text())
     params["track"]["gain"] = 0.8  # read by track_demos only: the re-executions, and what is trained on them, change
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    out = _dvc(["repro"], dst)
+    out = _dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
     ran = {line.split("'")[1] for line in out.splitlines() if line.startswith("Running stage")}
     assert ran == {"track_demos@3", "bc_evaluate@lfdt_track-3", "report"}
 
@@ -310,7 +310,7 @@ def test_temp_experiment_logs_to_the_workspace_store(project):
                    check=True, capture_output=True)
     before = _runs_in(dst / "mlflow.db")
     # twin.videos is read by the twin's evaluations only: three short stages rerun
-    _dvc(["exp", "run", "--temp", "-n", "smoke-temp", "-S", "twin.videos=0"], dst)
+    _dvc(["exp", "run", "--temp", "-n", "smoke-temp", "-S", "twin.videos=0"], dst, timeout=smoke.REPRO_TIMEOUT_S)
     after = _runs_in(dst / "mlflow.db")
     new = [r for r in after if r["run"] not in {b["run"] for b in before}]
     assert new, "the --temp experiment's runs are not in the workspace's mlflow.db"
