@@ -7,6 +7,29 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+_UNGROUPED: set[str] = set()
+"""Tests of an ``xdist_group`` that pytest-xdist did not tag with their group (see the hook below)."""
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items) -> None:
+    """Under `pytest -n N --dist loadgroup` (make test), note the tests of an ``xdist_group`` that pytest-xdist left
+    untagged: the group then spreads over the workers and each of them builds the smoke DAG at once (pytest 9.2 with
+    xdist 3.8 did this silently, two builds fighting for two cores)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") and config.getvalue("loadgroup"):
+        _UNGROUPED.update(item.nodeid for item in items if any(True for _ in item.iter_markers("xdist_group"))
+                          and "@" not in item.nodeid.rsplit("::", 1)[-1])
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item) -> None:
+    """Fail an untagged grouped test before its fixtures build anything, saying why."""
+    if item.nodeid in _UNGROUPED:
+        pytest.fail("pytest-xdist's loadgroup did not tag this test with its xdist_group, so the group's shared "
+                    "fixtures would be built on every worker: this pytest and pytest-xdist do not work together; "
+                    "install requirements.txt's pins", pytrace=False)
+
+
 @dataclass
 class SmokeProject:
     root: Path
