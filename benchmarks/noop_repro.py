@@ -1,10 +1,11 @@
 """Where a `dvc repro` with nothing to do spends its time: this pipeline against DVC's own floor, in one run.
 
-The pipeline's no-op repro is timed in the repository (it must be up to date: `dvc status` clean). The floor is a
-throwaway DVC project in a temporary folder with the same number of stages, each with the same number of code
-dependencies, params and outputs as the pipeline's average stage, but trivial files: what DVC costs per stage no
-matter what a stage does. A second floor with half the dependencies per stage and one with half the stages tell
-what each costs. Both ways are timed alternately; medians are reported, and the ratio pipeline / floor.
+The pipeline's no-op repro is timed in the repository, or in the project ``--project`` names (it must be up to
+date: `dvc status` clean). The floor is a throwaway DVC project in a temporary folder with the same number of
+stages, each with the same number of code dependencies, params and outputs as the pipeline's average stage, but
+trivial files: what DVC costs per stage no matter what a stage does. A second floor with half the dependencies
+per stage and one with half the stages tell what each costs. Both ways are timed alternately; medians are
+reported, and the ratio pipeline / floor.
 Writes benchmarks/results/noop_repro.json.
 """
 
@@ -75,19 +76,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default=str(ROOT / "benchmarks/results/noop_repro.json"))
+    ap.add_argument("--project", type=Path, default=ROOT,
+                    help="the reproduced project to time (default this repository; a copy of the DAG on tiny params, "
+                         "as benchmarks/noop_shapes.py builds, has the same shape without the full run's outputs)")
     args = ap.parse_args()
-    if _dvc(["status", "-q"], ROOT).strip():
-        raise SystemExit("the pipeline is not up to date (`dvc status`): reproduce it before timing a no-op")
-    shape = pipeline_shape(ROOT)
+    project = args.project.resolve()
+    if not (project / "dvc.lock").is_file():
+        raise SystemExit(f"--project {project}: no dvc.lock there; reproduce the pipeline in it first")
+    if _dvc(["status", "-q"], project).strip():
+        raise SystemExit(f"the pipeline in {project} is not up to date (`dvc status`): reproduce it before timing a "
+                         "no-op")
+    shape = pipeline_shape(project)
     deps, outs = round(shape["deps_per_stage"]), max(1, round(shape["outs_per_stage"]))
-    variants = {"pipeline": ROOT}
+    variants = {"pipeline": project}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        variants["floor"] = make_floor(tmp / "floor", shape["stages"], deps, outs, ROOT / "params.yaml")
-        variants["floor_half_deps"] = make_floor(tmp / "half_deps", shape["stages"], deps // 2, outs,
-                                                 ROOT / "params.yaml")
+        params_yaml = project / "params.yaml"
+        variants["floor"] = make_floor(tmp / "floor", shape["stages"], deps, outs, params_yaml)
+        variants["floor_half_deps"] = make_floor(tmp / "half_deps", shape["stages"], deps // 2, outs, params_yaml)
         variants["floor_half_stages"] = make_floor(tmp / "half_stages", shape["stages"] // 2, deps, outs,
-                                                   ROOT / "params.yaml")
+                                                   params_yaml)
         times: dict[str, list[float]] = {k: [] for k in variants}
         for _ in range(args.repeats):
             for name, cwd in variants.items():
@@ -95,6 +103,7 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in times.items()}
     result = {
         "benchmark": "no-op dvc repro: the pipeline against trivial DVC projects of its shape (DVC's own floor)",
+        "project": "this repository" if project == ROOT else str(project),
         "shape": shape, "floor_deps_per_stage": deps, "floor_outs_per_stage": outs, "repeats": args.repeats,
         "times_s": times, "median_s": med,
         "pipeline_over_floor": med["pipeline"] / med["floor"],
