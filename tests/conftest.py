@@ -17,7 +17,7 @@ def pytest_collection_modifyitems(config, items) -> None:
     untagged: the group then spreads over the workers and each of them builds the smoke DAG at once (pytest 9.2 with
     xdist 3.8 did this silently, two builds fighting for two cores)."""
     if os.environ.get("PYTEST_XDIST_WORKER") and config.getvalue("loadgroup"):
-        _UNGROUPED.update(item.nodeid for item in items if any(True for _ in item.iter_markers("xdist_group"))
+        _UNGROUPED.update(item.nodeid for item in items if item.get_closest_marker("xdist_group") is not None
                           and "@" not in item.nodeid.rsplit("::", 1)[-1])
 
 
@@ -46,7 +46,5 @@ def smoke_project(tmp_path_factory) -> SmokeProject:
     import smoke
 
     dst = smoke.make_project(tmp_path_factory.mktemp("smoke"))
-    # The timeout guards against a hang, never a speed: the smoke DAG takes about 4 minutes on a 2-core EPYC and
-    # went past 10 on a slower 2-core Xeon with the other pytest worker busy (CI of 2026-12-01).
     out = smoke.dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
     return SmokeProject(dst, out, {t: (dst / t).read_bytes() for t in smoke.TABLES})
