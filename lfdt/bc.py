@@ -26,33 +26,51 @@ from torch import nn
 from lfdt import layout, methods
 from lfdt.config import BCConfig
 from lfdt.layout import TaskLayout
-from lfdt.nets import Normalizer, check_finite, load_state, mlp, read_config, save_state
+from lfdt.nets import Normalizer, StackedMLP, check_finite, load_state, read_config, save_state
+from lfdt.optim import Adam
 
 
 class BCMember(nn.Module):
-    """One cloned policy: named state columns in, named action columns out."""
+    """Cloned policies of the same columns, one per seed, as one stack (``n`` = 1: one policy): named state columns
+    in, named action columns out. Inputs and actions are z-scored with each member's own statistics."""
 
-    def __init__(self, in_columns: list[str], out_columns: list[str], hidden: list[int]):
+    def __init__(self, in_columns: list[str], out_columns: list[str], hidden: list[int], n: int = 1,
+                 generators: list[torch.Generator] | None = None, init: bool = True):
         super().__init__()
         self.in_columns = list(in_columns)
         self.out_columns = list(out_columns)
-        self.norm = Normalizer(np.zeros(len(in_columns)), np.ones(len(in_columns)))
-        self.act_norm = Normalizer(np.zeros(len(out_columns)), np.ones(len(out_columns)))
-        self.net = mlp(len(in_columns), len(out_columns), hidden)
+        self.hidden = list(hidden)
+        self.n = n
+        n_in, n_out = len(in_columns), len(out_columns)
+        self.norm = Normalizer(np.zeros((n, 1, n_in)), np.ones((n, 1, n_in)))
+        self.act_norm = Normalizer(np.zeros((n, 1, n_out)), np.ones((n, 1, n_out)))
+        self.net = StackedMLP(n, n_in, n_out, hidden, generators=generators, init=init)
 
     def forward(self, s: torch.Tensor) -> torch.Tensor:
-        """The action (raw units) for raw states."""
+        """The actions (raw units) for raw states, ``(n, batch, in)`` -> ``(n, batch, out)``; a policy of one also
+        takes ``(batch, in)``."""
+        if s.dim() == 2:
+            if self.n != 1:
+                raise ValueError(f"a stack of {self.n} policies needs states of shape (n, batch, in)")
+            return self.forward(s[None])[0]
         return self.act_norm.inverse(self.net(self.norm(s)))
 
     def loss(self, s: torch.Tensor, a: torch.Tensor, input_noise: float = 0.0,
-             generator: torch.Generator | None = None) -> torch.Tensor:
-        """Mean squared error in normalised action units (every action dimension weighs alike); ``input_noise``
-        perturbs the normalised inputs (training only)."""
+             generators: list[torch.Generator] | None = None) -> torch.Tensor:
+        """Mean squared error per member, ``(n,)``, in normalised action units (every action dimension weighs
+        alike); ``input_noise`` perturbs the normalised inputs (training only), drawn from each member's generator."""
         z = self.norm(s)
         if input_noise > 0:
             # drawn on the CPU, so a seed gives the same noise on every device
-            z = z + input_noise * torch.randn(z.shape, generator=generator).to(z.device)
-        return ((self.net(z) - self.act_norm(a)) ** 2).mean()
+            noise = torch.stack([torch.randn(z.shape[1:], generator=g) for g in generators])
+            z = z + input_noise * noise.to(z.device)
+        return ((self.net(z) - self.act_norm(a)) ** 2).mean(dim=(1, 2))
+
+    def member(self, k: int) -> BCMember:
+        """Member k as a policy of its own (weights copied)."""
+        one = BCMember(self.in_columns, self.out_columns, self.hidden, init=False).to(self.norm.mean.device)
+        one.load_state_dict({name: t[k:k + 1].detach().clone() for name, t in self.state_dict().items()})
+        return one.train(self.training)
 
 
 @dataclass
@@ -88,58 +106,94 @@ def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) 
     return np.isin(episodes, val_eps)
 
 
-def train_member(task: BCTask, cfg: BCConfig, seed: int, log: Callable[[dict, int], None] | None = None,
-                 progress=None, device: str | torch.device = "cpu") -> tuple[BCMember, dict]:
-    """Fit one member on ``device``; keep the parameters of the lowest validation loss. The member comes back on
-    the CPU."""
-    torch.manual_seed(seed)
+def train_members(tasks: list[BCTask], cfg: BCConfig, seeds: list[int],
+                  logs: list[Callable[[dict, int], None] | None] | None = None, progress=None,
+                  device: str | torch.device = "cpu") -> tuple[list[BCMember], list[dict]]:
+    """Fit one member per (task, seed) as one stack on ``device``: the same columns, each its own data, split,
+    initialisation, minibatches and input noise; each keeps its parameters of lowest validation loss. A member's
+    result is the same bits whether it trains alone or in any stack. The members come back on the CPU, each a policy
+    of one."""
+    if len(tasks) != len(seeds) or not tasks:
+        raise ValueError(f"train_members: {len(tasks)} tasks for {len(seeds)} seeds")
+    first = tasks[0]
+    if any((t.in_columns, t.out_columns) != (first.in_columns, first.out_columns) for t in tasks):
+        raise ValueError("train_members stacks members of the same columns only")
     torch.set_num_threads(cfg.torch_threads)
-    rng = np.random.default_rng(seed)
-    gen = torch.Generator().manual_seed(seed)
-    s = task.frame[[layout.STATE_PREFIX + c for c in task.in_columns]].to_numpy(np.float32, copy=True)
-    a = task.frame[[layout.ACTION_PREFIX + c for c in task.out_columns]].to_numpy(np.float32, copy=True)
-    val = _split(task.frame.episode_index.to_numpy(), cfg.val_fraction, rng)
-    member = BCMember(task.in_columns, task.out_columns, list(cfg.hidden))
-    member.norm.load_state_dict(Normalizer.fit(s[~val], 1e-2).state_dict())
-    # actions can be torques in [-1, 1] or displacements of a few millimetres: both are learnt at unit scale
-    member.act_norm.load_state_dict(Normalizer.fit(a[~val], 1e-4).state_dict())
+    n = len(tasks)
+    gens = [torch.Generator().manual_seed(s) for s in seeds]
+    member = BCMember(first.in_columns, first.out_columns, list(cfg.hidden), n=n, generators=gens)
+    data_s, data_a, tr_idx, va_idx = [], [], [], []
+    for k, (task, seed) in enumerate(zip(tasks, seeds)):
+        s = task.frame[[layout.STATE_PREFIX + c for c in task.in_columns]].to_numpy(np.float32, copy=True)
+        a = task.frame[[layout.ACTION_PREFIX + c for c in task.out_columns]].to_numpy(np.float32, copy=True)
+        val = _split(task.frame.episode_index.to_numpy(), cfg.val_fraction, np.random.default_rng(seed))
+        with torch.no_grad():
+            member.norm.mean[k, 0] = Normalizer.fit(s[~val], 1e-2).mean
+            member.norm.std[k, 0] = Normalizer.fit(s[~val], 1e-2).std
+            # actions can be torques in [-1, 1] or displacements of a few millimetres: both are learnt at unit scale
+            member.act_norm.mean[k, 0] = Normalizer.fit(a[~val], 1e-4).mean
+            member.act_norm.std[k, 0] = Normalizer.fit(a[~val], 1e-4).std
+        data_s.append(torch.from_numpy(s).to(device))
+        data_a.append(torch.from_numpy(a).to(device))
+        # indices are drawn on the CPU (one generator for every device) and moved with the batch
+        tr_idx.append(torch.from_numpy(np.flatnonzero(~val)))
+        va_idx.append(torch.from_numpy(np.flatnonzero(val)).to(device))
     member.to(device)
-    s_t, a_t = torch.from_numpy(s).to(device), torch.from_numpy(a).to(device)
-    # indices are drawn on the CPU (one generator for every device) and moved with the batch
-    tr_idx = torch.from_numpy(np.flatnonzero(~val))
-    va_idx = torch.from_numpy(np.flatnonzero(val)).to(device)
-    opt = torch.optim.Adam(member.parameters(), lr=cfg.learning_rate)
-    best, best_state, best_it = float("inf"), None, 0
-    curve, running = [], 0.0
+    opt = Adam(member.parameters(), lr=cfg.learning_rate)
+    best: list[tuple[float, dict | None, int]] = [(float("inf"), None, 0)] * n
+    curves: list[list[dict]] = [[] for _ in range(n)]
+    running = np.zeros(n)
+    name = first.name
+    logs = logs or [None] * n
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
-        idx = tr_idx[torch.randint(0, len(tr_idx), (cfg.batch_size,), generator=gen)].to(device)
-        loss = member.loss(s_t[idx], a_t[idx], cfg.input_noise, gen)
+        sb, ab = [], []
+        for k in range(n):
+            idx = tr_idx[k][torch.randint(0, len(tr_idx[k]), (cfg.batch_size,), generator=gens[k])].to(device)
+            sb.append(data_s[k][idx])
+            ab.append(data_a[k][idx])
+        loss = member.loss(torch.stack(sb), torch.stack(ab), cfg.input_noise, gens)
         opt.zero_grad(set_to_none=True)
-        loss.backward()
+        loss.sum().backward()
         opt.step()
-        running += check_finite(loss.item(), "the BC loss", it)
+        values = loss.detach().cpu().numpy()
+        for k in range(n):
+            check_finite(float(values[k]), "the BC loss", it)
+        running += values
         if progress is not None:
-            progress.update(1)
+            progress.update(n)
         if it % cfg.eval_every == 0 or it == cfg.iterations:
-            n = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
-            with torch.no_grad():
-                sel = va_idx if len(va_idx) else tr_idx.to(device)
-                v = float(member.loss(s_t[sel], a_t[sel]))
-            point = {f"{task.name}/train_loss": running / n, f"{task.name}/val_loss": v}
-            running = 0.0
-            curve.append({"iteration": it, **point})
-            if v < best:
-                best, best_it = v, it
-                best_state = {k: t.clone() for k, t in member.state_dict().items()}
-            if log:
-                log(point, it)
-    member.load_state_dict(best_state)
+            cnt = cfg.eval_every if it % cfg.eval_every == 0 else it % cfg.eval_every
+            for k in range(n):
+                one = member.member(k)
+                with torch.no_grad():
+                    sel = va_idx[k] if len(va_idx[k]) else tr_idx[k].to(device)
+                    v = float(one.loss(data_s[k][sel][None], data_a[k][sel][None])[0])
+                point = {f"{name}/train_loss": float(running[k]) / cnt, f"{name}/val_loss": v}
+                curves[k].append({"iteration": it, **point})
+                if v < best[k][0]:
+                    best[k] = (v, one.state_dict(), it)
+                if logs[k]:
+                    logs[k](point, it)
+            running[:] = 0.0
     wall = time.perf_counter() - t0
-    stats = {"best_val_loss": best, "best_iteration": best_it, "train_samples": int((~val).sum()),
-             "val_samples": int(val.sum()), "wall_time_s": wall, "iterations_per_s": cfg.iterations / wall,
-             "curve": curve}
-    return member.cpu().eval(), stats
+    out, stats = [], []
+    for k in range(n):
+        one = member.member(k)
+        one.load_state_dict(best[k][1])
+        out.append(one.cpu().eval())
+        stats.append({"best_val_loss": best[k][0], "best_iteration": best[k][2],
+                      "train_samples": len(tr_idx[k]), "val_samples": len(va_idx[k]), "wall_time_s": wall,
+                      "iterations_per_s": cfg.iterations / wall, "stack_size": n, "curve": curves[k]})
+    return out, stats
+
+
+def train_member(task: BCTask, cfg: BCConfig, seed: int, log: Callable[[dict, int], None] | None = None,
+                 progress=None, device: str | torch.device = "cpu") -> tuple[BCMember, dict]:
+    """Fit one member (:func:`train_members` with one seed); keep the parameters of the lowest validation loss. The
+    member comes back on the CPU."""
+    members, stats = train_members([task], cfg, [seed], [log], progress, device)
+    return members[0], stats[0]
 
 
 class BCPolicy:
@@ -178,7 +232,7 @@ class BCPolicy:
         members, cfg = [], None
         for pt in sorted(Path(model_dir).glob("*.pt")):
             cfg = read_config(pt)
-            m = BCMember(cfg["in_columns"], cfg["out_columns"], cfg["bc"]["hidden"])
+            m = BCMember(cfg["in_columns"], cfg["out_columns"], cfg["bc"]["hidden"], init=False)
             members.append(load_state(m, pt))
         if not members:
             raise FileNotFoundError(f"no policy (*.pt) in {model_dir}")

@@ -32,6 +32,7 @@ from lfdt.config import DynamicsConfig
 from lfdt.errors import StageError
 from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, batches, check_finite, mlp
+from lfdt.optim import Adam
 
 
 class DynamicsModels(nn.Module):
@@ -117,8 +118,8 @@ def fit_dynamics(d: RandomY, cfg: DynamicsConfig, log: Callable[[dict, int], Non
     # minibatch indices are drawn on the CPU (one generator for every device) and moved with the batch
     tr_idx = torch.from_numpy(np.flatnonzero(train))
     va_idx = torch.from_numpy(np.flatnonzero(val)).to(device)
-    opt_f = torch.optim.Adam(models.f.parameters(), lr=cfg.learning_rate)
-    opt_g = torch.optim.Adam(models.g.parameters(), lr=cfg.learning_rate)
+    opt_f = Adam(models.f.parameters(), lr=cfg.learning_rate)
+    opt_g = Adam(models.g.parameters(), lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(cfg.seed)
     a_mean = a[tr_idx.to(device)].mean(dim=0)
     if models.a_norm is not None:

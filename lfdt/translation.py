@@ -20,6 +20,7 @@ never read.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +36,8 @@ from lfdt import data, layout, methods
 from lfdt.config import TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.layout import TaskLayout
-from lfdt.nets import Normalizer, check_finite, mlp
+from lfdt.nets import Normalizer, StackedMLP, check_finite, sin_cos, softplus
+from lfdt.optim import Adam
 
 PAIRING_INDEX = {p: i for i, p in enumerate(layout.PAIRINGS)}
 
@@ -82,8 +84,8 @@ class Kinematics:
 
 def forward_kinematics(q: torch.Tensor, links: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
     """End positions (..., 2) of a planar arm for joint angles q (..., n), differentiable."""
-    phi = torch.cumsum(q, dim=-1)
-    return torch.stack([base[0] - (links * torch.sin(phi)).sum(-1), base[1] + (links * torch.cos(phi)).sum(-1)], -1)
+    sin, cos = sin_cos(torch.cumsum(q, dim=-1))
+    return torch.stack([base[0] - (links * sin).sum(-1), base[1] + (links * cos).sum(-1)], -1)
 
 
 @dataclass
@@ -148,19 +150,27 @@ def split_held_out(sets: dict[str, Transitions], fraction: float, seed: int
 
 
 class Translator(nn.Module):
-    """G, D and the X normalisers of both pairings, saved as one state dict."""
+    """G, D and the X normalisers of both pairings, saved as one state dict.
+
+    G and D are stacks of ``n`` nets (:class:`lfdt.nets.StackedMLP`): the translators of several seeds (or restarts)
+    of one configuration train as one model, each member with its own weights, data and random draws; what they
+    share (normalisers, skips, Y's kinematics) is data, not learnt. States carry the stack as their first dimension:
+    ``(n, batch, columns)``. A saved translator is a stack of one (:meth:`member`)."""
 
     def __init__(self, hidden: list[int], tl: TaskLayout, slope: float = 0.2,
-                 kinematics: Kinematics | None = None, d_cols: list[int] | None = None, hand_offset: bool = False):
+                 kinematics: Kinematics | None = None, d_cols: list[int] | None = None, hand_offset: bool = False,
+                 n: int = 1, generators: list[torch.Generator] | None = None):
         super().__init__()
         x_dim = len(tl.canonical_x_columns("R1H"))
         y_dim = len(tl.state_columns("Y"))
+        self.n = n
+        self.hidden, self.slope = list(hidden), slope
         self.x_norms = nn.ModuleDict({p: Normalizer(np.zeros(x_dim), np.ones(x_dim)) for p in layout.PAIRINGS})
-        self.G = mlp(x_dim + len(layout.PAIRINGS), y_dim, hidden, slope)
+        self.G = StackedMLP(n, x_dim + len(layout.PAIRINGS), y_dim, hidden, slope, generators)
         # the columns of y D sees (disc_input): all, or the robots' only
         d_cols = list(range(y_dim)) if d_cols is None else d_cols
         self.register_buffer("d_idx", torch.as_tensor(d_cols, dtype=torch.long))
-        self.D = mlp(len(d_cols), 1, hidden, slope)
+        self.D = StackedMLP(n, len(d_cols), 1, hidden, slope, generators)
         # skip connections (see skip_pairs): y_n[j] += x_n[src[j]] * scale[j] + offset[j] where src[j] >= 0
         n_p = len(layout.PAIRINGS)
         self.register_buffer("skip_src", torch.full((n_p, y_dim), -1, dtype=torch.long))
@@ -185,27 +195,40 @@ class Translator(nn.Module):
         self.register_buffer("hand_dst", torch.zeros(n_p, 2, dtype=torch.long))
         self.register_buffer("hand_scale", torch.ones(n_p, 2))
         self.register_buffer("hand_offset", torch.zeros(n_p, 2))
-        # hand_offset: a constant offset per pairing between the hand and the missing robot's end, trained with G
-        # (Y's normalised units); only then, so that translators without it keep their state dicts unchanged
-        self.hand_shift = nn.Parameter(torch.zeros(n_p, 2)) if hand_offset else None
+        # hand_offset: a constant offset per member and pairing between the hand and the missing robot's end, trained
+        # with G (Y's normalised units); only then, so that translators without it have no such parameter
+        self.hand_shift = nn.Parameter(torch.zeros(n, n_p, 2)) if hand_offset else None
+
+    def member(self, k: int) -> Translator:
+        """Member k as a translator of its own (a stack of one; weights copied, the shared buffers too)."""
+        one = Translator.__new__(Translator)
+        nn.Module.__init__(one)
+        one.n, one.hidden, one.slope = 1, self.hidden, self.slope
+        for name, buf in self.named_buffers(recurse=False):
+            one.register_buffer(name, buf.clone())
+        one.x_norms = copy.deepcopy(self.x_norms)
+        one.G, one.D = self.G.member(k), self.D.member(k)
+        one.hand_shift = None if self.hand_shift is None else nn.Parameter(self.hand_shift[k:k + 1].detach().clone())
+        return one.train(self.training)
 
     def generator_parameters(self) -> list[nn.Parameter]:
         """What G's optimiser trains: G's weights, and the learnt hand offset where there is one."""
         return [*self.G.parameters(), *([] if self.hand_shift is None else [self.hand_shift])]
 
-    def hand_offset_m(self, tl: TaskLayout) -> dict[str, float]:
-        """The learnt hand offset in metres (the missing robot's end minus the hand), keyed by the missing robot's
-        Y column; empty without one."""
+    def hand_offset_m(self, tl: TaskLayout, k: int = 0) -> dict[str, float]:
+        """Member k's learnt hand offset in metres (the missing robot's end minus the hand), keyed by the missing
+        robot's Y column; empty without one."""
         if self.hand_shift is None:
             return {}
         cols = tl.state_columns("Y")
-        shift = self.hand_shift.detach() * self.y_std[self.hand_dst]
-        return {cols[int(j)]: float(shift[i, k]) for i in PAIRING_INDEX.values()
-                for k, j in enumerate(self.hand_dst[i])}
+        shift = self.hand_shift[k].detach() * self.y_std[self.hand_dst]
+        return {cols[int(j)]: float(shift[i, c]) for i in PAIRING_INDEX.values()
+                for c, j in enumerate(self.hand_dst[i])}
 
     def generate(self, x_n: torch.Tensor, pairing_idx: torch.Tensor,
                  x_prev_n: torch.Tensor | None = None) -> torch.Tensor:
-        """y_hat (normalised Y state) from normalised canonical x and the pairing index.
+        """y_hat (normalised Y states, ``(n, batch, y)``) from normalised canonical x (``(n, batch, x)``) and the
+        pairing index (``(n, batch)``).
 
         With Y's robot model (``kinematics: forward``) the end columns are the forward kinematics of the joint
         angles, and, given the previous state ``x_prev_n`` (equal to ``x_n`` at an episode's first frame, where
@@ -223,7 +246,7 @@ class Translator(nn.Module):
         src = self.skip_src[pairing_idx]
         has = src >= 0
         if bool(has.any()):
-            copied = torch.gather(x_n, 1, src.clamp(min=0))
+            copied = torch.gather(x_n, -1, src.clamp(min=0))
             y = y + torch.where(has, copied * self.skip_scale[pairing_idx] + self.skip_offset[pairing_idx],
                                 torch.zeros_like(y))
         return y
@@ -231,42 +254,47 @@ class Translator(nn.Module):
     def generate_pair(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pairing_idx: torch.Tensor
                       ) -> tuple[torch.Tensor, torch.Tensor]:
         """(y_hat_t, y_hat_t+1) of transitions (x, x2) whose previous states are x0, in one pass of G."""
-        n = len(x)
+        n = x.shape[1]
         if not len(self.fk_q):
-            y = self._raw_generate(torch.cat([x, x2]), pairing_idx.repeat(2))
-            return y[:n], y[n:]
-        y = self._raw_generate(torch.cat([x0, x, x2]), pairing_idx.repeat(3))
-        y0, y1, y2 = y[:n], y[n:2 * n], y[2 * n:]
+            y = self._raw_generate(torch.cat([x, x2], dim=1), pairing_idx.repeat(1, 2))
+            return y[:, :n], y[:, n:]
+        y = self._raw_generate(torch.cat([x0, x, x2], dim=1), pairing_idx.repeat(1, 3))
+        y0, y1, y2 = y[:, :n], y[:, n:2 * n], y[:, 2 * n:]
         return self.apply_kinematics(y1, y0), self.apply_kinematics(y2, y1)
 
     def apply_kinematics(self, y_n: torch.Tensor, y_prev_n: torch.Tensor | None = None) -> torch.Tensor:
         """Each arm's end columns from its joint angles; its joint velocities from the change since ``y_prev_n``
-        (when given). Normalised units in and out."""
+        (when given). Normalised units in and out, any leading dimensions."""
         qi, dqi, ei = self.fk_q, self.fk_dq, self.fk_ee  # (arms, joints), (arms, joints), (arms, 2)
-        q = y_n[:, qi] * self.y_std[qi] + self.y_mean[qi]  # (batch, arms, joints)
-        phi = torch.cumsum(q, dim=-1)
-        ee = torch.stack([self.fk_base[:, 0] - (self.fk_links * torch.sin(phi)).sum(-1),
-                          self.fk_base[:, 1] + (self.fk_links * torch.cos(phi)).sum(-1)], dim=-1)
+        lead = y_n.shape[:-1]
+        q = y_n[..., qi] * self.y_std[qi] + self.y_mean[qi]  # (..., arms, joints)
+        sin, cos = sin_cos(torch.cumsum(q, dim=-1))
+        ee = torch.stack([self.fk_base[:, 0] - (self.fk_links * sin).sum(-1),
+                          self.fk_base[:, 1] + (self.fk_links * cos).sum(-1)], dim=-1)
         y_n = y_n.clone()
-        y_n[:, ei.reshape(-1)] = ((ee - self.y_mean[ei]) / self.y_std[ei]).reshape(len(y_n), -1)
+        y_n[..., ei.reshape(-1)] = ((ee - self.y_mean[ei]) / self.y_std[ei]).reshape(*lead, -1)
         if y_prev_n is not None:
-            q_prev = y_prev_n[:, qi] * self.y_std[qi] + self.y_mean[qi]
+            q_prev = y_prev_n[..., qi] * self.y_std[qi] + self.y_mean[qi]
             dq = ((q - q_prev) / self.fk_dt - self.y_mean[dqi]) / self.y_std[dqi]
-            y_n[:, dqi.reshape(-1)] = dq.reshape(len(y_n), -1)
+            y_n[..., dqi.reshape(-1)] = dq.reshape(*lead, -1)
         return y_n
 
     def disc(self, y: torch.Tensor) -> torch.Tensor:
-        """D's logit that ``y`` (normalised Y states) is real, from the columns D sees."""
+        """D's logit (``(n, batch, 1)``) that ``y`` (normalised Y states, ``(n, batch, y)``) is real, from the
+        columns D sees."""
         return self.D(y.index_select(-1, self.d_idx))
 
     def translate(self, x: np.ndarray, pairing: str) -> torch.Tensor:
-        """Normalised y_hat for the raw canonical states of one episode of a pairing, in time order (no gradient).
+        """Normalised y_hat for the raw canonical states of one episode of a pairing, in time order (no gradient), by
+        a translator of one member.
 
         The first state is the episode's start (the arms at rest)."""
+        if self.n != 1:
+            raise ValueError(f"translate() needs a translator of one member; this one has {self.n} (use member(k))")
         with torch.no_grad():
-            xt = self.x_norms[pairing](torch.as_tensor(x, dtype=torch.float32))
-            idx = torch.full((len(xt),), PAIRING_INDEX[pairing], dtype=torch.long)
-            return self.generate(xt, idx, torch.cat([xt[:1], xt[:-1]]))
+            xt = self.x_norms[pairing](torch.as_tensor(x, dtype=torch.float32))[None]
+            idx = torch.full(xt.shape[:2], PAIRING_INDEX[pairing], dtype=torch.long)
+            return self.generate(xt, idx, torch.cat([xt[:, :1], xt[:, :-1]], dim=1))[0]
 
 
 def skip_pairs(pairing: str, object_mode: str, hand_skip: bool, tl: TaskLayout) -> list[tuple[str, str]]:
@@ -321,35 +349,44 @@ def fit_x_normalizers(translator: Translator, dyn: DynamicsModels, random_x: dic
 
 
 def _gan_losses(kind: str):
+    """(D's loss, G's adversarial loss) per member, from logits ``(n, batch, 1)``: shape ``(n,)``.
+
+    'bce' is eq. 1's binary cross-entropy with logits, written as softplus (-log sigmoid(l) = softplus(-l)):
+    :func:`lfdt.nets.softplus` gives every element the same code wherever it sits in a stack of members."""
     if kind == "bce":
         def d_loss(real, fake):
-            return (nnf.binary_cross_entropy_with_logits(real, torch.ones_like(real))
-                    + nnf.binary_cross_entropy_with_logits(fake, torch.zeros_like(fake)))
+            return softplus(-real).mean(dim=(1, 2)) + softplus(fake).mean(dim=(1, 2))
 
         def g_loss(fake):
-            return nnf.binary_cross_entropy_with_logits(fake, torch.ones_like(fake))
+            return softplus(-fake).mean(dim=(1, 2))
     else:
         def d_loss(real, fake):
-            return ((real - 1) ** 2).mean() + (fake ** 2).mean()
+            return ((real - 1) ** 2).mean(dim=(1, 2)) + (fake ** 2).mean(dim=(1, 2))
 
         def g_loss(fake):
-            return ((fake - 1) ** 2).mean()
+            return ((fake - 1) ** 2).mean(dim=(1, 2))
     return d_loss, g_loss
 
 
 class _Sampler:
-    """Draws the index sets of one batch from per-pairing tensors."""
+    """Draws the transitions of one member's batches from per-pairing tensors, with the member's generator."""
 
     def __init__(self, sets: dict[str, Transitions], translator: Translator, gen: torch.Generator,
-                 device: str | torch.device = "cpu"):
+                 device: str | torch.device = "cpu", cache: dict | None = None):
         self.gen, self.device = gen, device
         self.x, self.x2, self.x0, self.n = {}, {}, {}, {}
         for p, tr in sets.items():
-            norm = translator.x_norms[p]
-            with torch.no_grad():
-                self.x[p] = norm(torch.as_tensor(tr.x, device=device))
-                self.x2[p] = norm(torch.as_tensor(tr.x2, device=device))
-                self.x0[p] = self.x[p] if tr.x_prev is None else norm(torch.as_tensor(tr.x_prev, device=device))
+            key = (id(tr), p)
+            if cache is not None and key in cache:  # members sharing a data set share its tensors
+                self.x[p], self.x2[p], self.x0[p] = cache[key]
+            else:
+                norm = translator.x_norms[p]
+                with torch.no_grad():
+                    self.x[p] = norm(torch.as_tensor(tr.x, device=device))
+                    self.x2[p] = norm(torch.as_tensor(tr.x2, device=device))
+                    self.x0[p] = self.x[p] if tr.x_prev is None else norm(torch.as_tensor(tr.x_prev, device=device))
+                if cache is not None:
+                    cache[key] = (self.x[p], self.x2[p], self.x0[p])
             self.n[p] = len(tr.x)
 
     def sample(self, per_pairing: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -366,7 +403,10 @@ class _Sampler:
 
 
 class _Losses:
-    """The generator's losses of eq. 6 on one batch, reusable for training, selection and diagnostics."""
+    """The generator's losses of eq. 6 on one batch per member, reusable for training, selection and diagnostics.
+
+    Inputs carry the members as their first dimension, ``(n, batch, ...)``; every loss comes back per member,
+    ``(n,)``."""
 
     def __init__(self, tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig, tl: TaskLayout):
         self.tr, self.dyn, self.cfg = tr, dyn, cfg
@@ -387,37 +427,40 @@ class _Losses:
                  ) -> dict[str, torch.Tensor]:
         """y_hat, y_hat2, the per-column squared dynamics error and the identity loss of a batch
         (``x0``: the states one step before ``x``, used only with Y's robot model)."""
+        n, b = x.shape[:2]
         y_hat, y_hat2 = self.tr.generate_pair(x0, x, x2, pidx)
         a_tilde = self.dyn.inverse_model(y_hat, y_hat2)
         y_tilde = self.dyn.forward_model(y_hat, a_tilde)
         dyn_sq = ((y_tilde - y_hat2) / self.dyn_scale) ** 2
-        y_robot = y_hat[self.robot_mask[pidx]].view(-1, self.n_robot)
-        l_id = ((y_robot - x[:, :self.n_robot]) ** 2).mean()
+        y_robot = y_hat[self.robot_mask[pidx]].view(n, b, self.n_robot)
+        l_id = ((y_robot - x[..., :self.n_robot]) ** 2).mean(dim=(1, 2))
         tr = self.tr
-        hand = torch.gather(x, 1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]
+        hand = torch.gather(x, -1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]
         if tr.hand_shift is not None:
-            hand = hand + tr.hand_shift[pidx]
-        l_hand = ((torch.gather(y_hat, 1, tr.hand_dst[pidx]) - hand) ** 2).mean()
+            hand = hand + tr.hand_shift[torch.arange(n, device=pidx.device)[:, None], pidx]
+        l_hand = ((torch.gather(y_hat, -1, tr.hand_dst[pidx]) - hand) ** 2).mean(dim=(1, 2))
         return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq,
-                "dyn": (dyn_sq * self.dyn_weight).mean(),
+                "dyn": (dyn_sq * self.dyn_weight).mean(dim=(1, 2)),
                 "id": l_id, "hand": l_hand}
 
     def dyn_split(self, dyn_sq: torch.Tensor, pidx: torch.Tensor) -> dict[str, float]:
-        """L_dyn split by the real robot's columns, the missing robot's and the object's."""
+        """L_dyn split by the real robot's columns, the missing robot's and the object's (one member)."""
+        dyn_sq, pidx = dyn_sq[0], pidx[0]
         real = self.robot_mask[pidx]
         missing = ~real & ~self.object_mask
         return {"real_robot": float(dyn_sq[real].mean()), "missing_robot": float(dyn_sq[missing].mean()),
                 "object": float(dyn_sq[:, self.object_mask].mean())}
 
     def selection(self, out: dict[str, torch.Tensor]) -> torch.Tensor:
-        """The held-out translation loss a checkpoint is kept by: eq. 6 without the adversarial term (D changes
-        while training, so its loss is no yardstick across iterations)."""
+        """The held-out translation loss a checkpoint is kept by, per member: eq. 6 without the adversarial term
+        (D changes while training, so its loss is no yardstick across iterations)."""
         return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"] + self.cfg.lambda_hand * out["hand"]
 
 
 def _normalised(tr: Translator, sets: dict[str, Transitions], device: str | torch.device = "cpu"
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """All transitions of some pairings, normalised, on ``device``: (x_prev, x, x2, pairing index)."""
+    """All transitions of some pairings, normalised, on ``device``, as one member's batch: (x_prev, x, x2, pairing
+    index), each with a leading dimension of 1."""
     x0s, xs, x2s, ps = [], [], [], []
     with torch.no_grad():
         for p, t in sets.items():
@@ -425,7 +468,58 @@ def _normalised(tr: Translator, sets: dict[str, Transitions], device: str | torc
             xs.append(tr.x_norms[p](torch.as_tensor(t.x, device=device)))
             x2s.append(tr.x_norms[p](torch.as_tensor(t.x2, device=device)))
             ps.append(torch.full((len(t.x),), PAIRING_INDEX[p], dtype=torch.long, device=device))
-    return torch.cat(x0s), torch.cat(xs), torch.cat(x2s), torch.cat(ps)
+    return torch.cat(x0s)[None], torch.cat(xs)[None], torch.cat(x2s)[None], torch.cat(ps)[None]
+
+
+@dataclass
+class Member:
+    """One translator of a stack: its demonstrations, those held out for selection, and its seed."""
+
+    demos: dict[str, Transitions]
+    """The demonstrations G trains on, per pairing."""
+    seed: int
+    """Initialisation and minibatch seed."""
+    held_out: dict[str, Transitions] | None = None
+    """Demonstrations G never trains on; its parameters of the lowest translation loss on them are kept."""
+
+
+def train_translators(members: list[Member], random_x: dict[str, Transitions], y_random: np.ndarray,
+                      dyn: DynamicsModels, cfg: TranslatorConfig, std_floor: float = 1e-2,
+                      logs: list[Callable[[dict, int], None] | None] | None = None, progress=None,
+                      *, tl: TaskLayout, kinematics: Kinematics | None = None, device: str | torch.device = "cpu"
+                      ) -> tuple[list[Translator], list[dict]]:
+    """Train the translators of several members of one configuration (seeds, restarts) as one stacked model: G and D
+    with eq. 6 (frozen F, F^-1) on ``device``. Each member has its own initialisation, demonstrations, minibatches
+    and checkpoint; its result is the same bits whether it trains alone or in any stack (a test checks). Returns one
+    translator (a stack of one, on the CPU) and one dict of training statistics per member.
+
+    Every ``cfg.select_every`` iterations a member's translation loss on its held-out demonstrations is measured and
+    it keeps its G of the lowest value (without them, the last iterate). ``kinematics`` is required with
+    ``cfg.kinematics == 'forward'`` (the arms whose end columns G does not output).
+    """
+    if not members:
+        raise ValueError("train_translators needs at least one member")
+    torch.set_num_threads(cfg.torch_threads)
+    dyn = dyn.eval()
+    for prm in dyn.parameters():
+        prm.requires_grad_(False)
+    if cfg.kinematics == "forward" and kinematics is None:
+        raise ValueError("translator.kinematics = 'forward' needs the arms' kinematics; this task has none")
+    y_cols = tl.state_columns("Y")
+    d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
+    gens = [torch.Generator().manual_seed(m.seed) for m in members]
+    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
+                    d_cols=d_cols, hand_offset=cfg.hand_offset, n=len(members), generators=gens)
+    tr.y_mean.copy_(dyn.y_norm.mean)
+    tr.y_std.copy_(dyn.y_norm.std)
+    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
+    try:
+        tr.to(device)
+        dyn.to(device)
+        return _train_stack(tr, dyn, members, random_x, y_random, cfg, gens, logs or [None] * len(members),
+                            progress, tl, device)
+    finally:
+        dyn.cpu()
 
 
 def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
@@ -434,35 +528,10 @@ def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transiti
                      *, tl: TaskLayout, kinematics: Kinematics | None = None,
                      held_out: dict[str, Transitions] | None = None, device: str | torch.device = "cpu"
                      ) -> tuple[Translator, dict]:
-    """Train G and D with eq. 6 (frozen F, F^-1) on ``device``. Returns the translator (on the CPU, as ``dyn``
-    is left) and training statistics.
-
-    ``held_out``: demonstrations G never trains on; every ``cfg.select_every`` iterations the translation loss on
-    them is measured and G keeps the parameters of its lowest value (without them, the last iterate is kept).
-    ``kinematics`` is required with ``cfg.kinematics == 'forward'`` (the arms whose end columns G does not output).
-    """
-    torch.manual_seed(seed)
-    torch.set_num_threads(cfg.torch_threads)
-    gen = torch.Generator().manual_seed(seed)
-    dyn = dyn.eval()
-    for prm in dyn.parameters():
-        prm.requires_grad_(False)
-    if cfg.kinematics == "forward" and kinematics is None:
-        raise ValueError("translator.kinematics = 'forward' needs the arms' kinematics; this task has none")
-    y_cols = tl.state_columns("Y")
-    d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
-    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
-                    d_cols=d_cols, hand_offset=cfg.hand_offset)
-    tr.y_mean.copy_(dyn.y_norm.mean)
-    tr.y_std.copy_(dyn.y_norm.std)
-    fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
-    try:
-        tr.to(device)
-        dyn.to(device)
-        return _train_translator(tr, dyn, demos, random_x, y_random, cfg, gen, log, progress, tl, held_out, device)
-    finally:
-        tr.cpu()
-        dyn.cpu()
+    """One translator (:func:`train_translators` with one member). Returns it (on the CPU) and its statistics."""
+    trs, stats = train_translators([Member(demos, seed, held_out)], random_x, y_random, dyn, cfg, std_floor,
+                                   [log], progress, tl=tl, kinematics=kinematics, device=device)
+    return trs[0], stats[0]
 
 
 RESTART_SEED_STRIDE = 1000
@@ -478,6 +547,13 @@ def restart_key(r: int, key: str) -> str:
     """The name of restart ``r``'s metric ``key``: restart 0 under the plain name, restart r > 0 under
     ``restart<r>/``."""
     return key if r == 0 else f"restart{r}/{key}"
+
+
+def restart_log(log: Callable[[dict, int], None] | None, r: int) -> Callable[[dict, int], None] | None:
+    """``log`` with restart r's metric names (:func:`restart_key`)."""
+    if log is None or r == 0:
+        return log
+    return lambda m, i: log({restart_key(r, k): v for k, v in m.items()}, i)
 
 
 class MeanTranslator:
@@ -498,117 +574,139 @@ class MeanTranslator:
 
 def train_restarts(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
                    dyn: DynamicsModels, cfg: TranslatorConfig, seed: int,
-                   log: Callable[[dict, int], None] | None = None, **kwargs) -> tuple[list[Translator], list[dict]]:
-    """``cfg.restarts`` translators of one configuration (:func:`train_translator` with seeds seed + 1000 r).
-    Restart 0 logs under its own names, restart r > 0 under ``restart<r>/``."""
-    trs, stats = [], []
-    for r in range(cfg.restarts):
-        log_r = log if r == 0 or log is None else (
-            lambda m, i, r=r: log({restart_key(r, k): v for k, v in m.items()}, i))
-        tr, st = train_translator(demos, random_x, y_random, dyn, cfg, restart_seed(seed, r), log=log_r,
-                                  **kwargs)
-        trs.append(tr)
-        stats.append(st)
-    return trs, stats
+                   log: Callable[[dict, int], None] | None = None, held_out: dict[str, Transitions] | None = None,
+                   **kwargs) -> tuple[list[Translator], list[dict]]:
+    """``cfg.restarts`` translators of one configuration (seeds seed + 1000 r), trained as one stack. Restart 0 logs
+    under its own names, restart r > 0 under ``restart<r>/``."""
+    members = [Member(demos, restart_seed(seed, r), held_out) for r in range(cfg.restarts)]
+    return train_translators(members, random_x, y_random, dyn, cfg,
+                             logs=[restart_log(log, r) for r in range(cfg.restarts)], **kwargs)
 
 
-def _train_translator(tr: Translator, dyn: DynamicsModels, demos: dict[str, Transitions],
-                      random_x: dict[str, Transitions], y_random: np.ndarray, cfg: TranslatorConfig,
-                      gen: torch.Generator, log: Callable[[dict, int], None] | None, progress, tl: TaskLayout,
-                      held_out: dict[str, Transitions] | None, device: str | torch.device) -> tuple[Translator, dict]:
-    """The training loop of :func:`train_translator`, with ``tr`` and ``dyn`` on ``device``."""
-    demo_s, rand_s = _Sampler(demos, tr, gen, device), _Sampler(random_x, tr, gen, device)
+def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], random_x: dict[str, Transitions],
+                 y_random: np.ndarray, cfg: TranslatorConfig, gens: list[torch.Generator],
+                 logs: list[Callable[[dict, int], None] | None], progress, tl: TaskLayout,
+                 device: str | torch.device) -> tuple[list[Translator], list[dict]]:
+    """The training loop of :func:`train_translators`, with ``tr`` and ``dyn`` on ``device``."""
+    n = len(members)
+    cache: dict = {}
+    demo_s = [_Sampler(m.demos, tr, g, device, cache) for m, g in zip(members, gens)]
+    rand_s = [_Sampler(random_x, tr, g, device, cache) for g in gens]
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random, device=device))
-    opt_g = torch.optim.Adam(tr.generator_parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
-    opt_d = torch.optim.Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
+    opt_g = Adam(tr.generator_parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
+    opt_d = Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
     losses = _Losses(tr, dyn, cfg, tl)
     quarter = max(1, cfg.batch_size // 4)
-    hold = _normalised(tr, held_out, device) if held_out else None
-    pool = torch.empty(0, len(tl.state_columns("Y")), device=device)
-    best = (float("inf"), None, 0)
-    sums: dict[str, float] = {}
-    curve = []
+    holds = [_normalised(tr, m.held_out, device) if m.held_out else None for m in members]
+    y_dim = len(tl.state_columns("Y"))
+    pools = [torch.empty(0, y_dim, device=device) for _ in members]
+    best: list[tuple[float, dict | None, int]] = [(float("inf"), None, 0)] * n
+    sums = [dict() for _ in members]
+    curves: list[list[dict]] = [[] for _ in members]
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
-        xd0, xd, xd2, pd_ = demo_s.sample(quarter)
-        xr0, xr, xr2, pr = rand_s.sample(quarter)
-        x0, x, x2, pidx = torch.cat([xd0, xr0]), torch.cat([xd, xr]), torch.cat([xd2, xr2]), torch.cat([pd_, pr])
+        batch = []
+        for k in range(n):
+            xd0, xd, xd2, pd_ = demo_s[k].sample(quarter)
+            xr0, xr, xr2, pr = rand_s[k].sample(quarter)
+            batch.append((torch.cat([xd0, xr0]), torch.cat([xd, xr]), torch.cat([xd2, xr2]), torch.cat([pd_, pr])))
+        x0, x, x2, pidx = (torch.stack(parts) for parts in zip(*batch))
+        n_demo = 2 * quarter  # the batch is [demonstrations, X random], each half both pairings
         out = losses(x0, x, x2, pidx)
         y_hat = out["y_hat"]
         # --- D step (fakes detached; with a pool, half of them come from past generators, as in Cycle-Dynamics)
-        y_adv = y_hat if cfg.adv_on == "all" else y_hat[len(xd):]  # the batch is [demonstrations, X random]
+        y_adv = y_hat if cfg.adv_on == "all" else y_hat[:, n_demo:]
         fake = y_adv.detach()
-        if cfg.history_size:
-            if len(pool):
-                n_old = len(fake) // 2
-                old = pool[torch.randint(0, len(pool), (n_old,), generator=gen).to(device)]
-                fake_d = torch.cat([fake[: len(fake) - n_old], old])
+        fakes, reals = [], []
+        for k in range(n):
+            fake_k = fake[k]
+            if cfg.history_size:
+                if len(pools[k]):
+                    n_old = len(fake_k) // 2
+                    old = pools[k][torch.randint(0, len(pools[k]), (n_old,), generator=gens[k]).to(device)]
+                    fake_d = torch.cat([fake_k[: len(fake_k) - n_old], old])
+                else:
+                    fake_d = fake_k
+                pools[k] = torch.cat([pools[k], fake_k])[-cfg.history_size:]
             else:
-                fake_d = fake
-            pool = torch.cat([pool, fake])[-cfg.history_size:]
-        else:
-            fake_d = fake
-        y_real = y_real_all[torch.randint(0, len(y_real_all), (len(y_adv),), generator=gen).to(device)]
-        d_both = tr.disc(torch.cat([y_real, fake_d]))
-        d_real, d_fake = d_both[:len(y_real)], d_both[len(y_real):]
+                fake_d = fake_k
+            fakes.append(fake_d)
+            reals.append(y_real_all[torch.randint(0, len(y_real_all), (y_adv.shape[1],), generator=gens[k])
+                                    .to(device)])
+        y_real, fake_d = torch.stack(reals), torch.stack(fakes)
+        d_both = tr.disc(torch.cat([y_real, fake_d], dim=1))
+        d_real, d_fake = d_both[:, :y_real.shape[1]], d_both[:, y_real.shape[1]:]
         l_d = d_loss_fn(d_real, d_fake)
         opt_d.zero_grad(set_to_none=True)
-        l_d.backward()
+        l_d.sum().backward()
         opt_d.step()
         # --- G step
         l_adv = g_loss_fn(tr.disc(y_adv))
         loss = (cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
                 + cfg.lambda_hand * out["hand"])
         opt_g.zero_grad(set_to_none=True)
-        loss.backward()
+        loss.sum().backward()
         opt_g.step()
-        check_finite(float(loss.detach()), "the translator's G loss", it)
-        check_finite(float(l_d.detach()), "the translator's D loss", it)
         with torch.no_grad():
-            acc = 0.5 * ((d_real > 0).float().mean() + (d_fake < 0).float().mean())
-        for k, v in (("loss/D", l_d), ("loss/adv", l_adv), ("loss/dyn", out["dyn"]), ("loss/id", out["id"]),
-                     ("loss/hand", out["hand"]),
-                     ("loss/G_total", loss), ("D/accuracy", acc)):
-            sums[k] = sums.get(k, 0.0) + v.item()
+            acc = 0.5 * ((d_real > 0).float().mean(dim=(1, 2)) + (d_fake < 0).float().mean(dim=(1, 2)))
+            values = torch.stack([l_d, l_adv, out["dyn"], out["id"], out["hand"], loss, acc]).detach().cpu().numpy()
+        for k in range(n):
+            check_finite(float(values[5, k]), "the translator's G loss", it)
+            check_finite(float(values[0, k]), "the translator's D loss", it)
+            for j, key in enumerate(("loss/D", "loss/adv", "loss/dyn", "loss/id", "loss/hand", "loss/G_total",
+                                     "D/accuracy")):
+                sums[k][key] = sums[k].get(key, 0.0) + float(values[j, k])
         if progress is not None:
-            progress.update(1)
-        point = None
-        if it % cfg.log_every == 0 or it == cfg.iterations:
-            n = cfg.log_every if it % cfg.log_every == 0 else it % cfg.log_every
-            point = {k: v / n for k, v in sums.items()}
-            sums = {}
-        if hold is not None and (it % cfg.select_every == 0 or it == cfg.iterations):
-            with torch.no_grad():
-                h = losses(*hold)
-                sel = float(losses.selection(h))
-            point = point or {}
-            point.update({"heldout/selection_loss": sel, "heldout/dyn": float(h["dyn"]), "heldout/id": float(h["id"])})
-            if sel < best[0]:
-                shift = None if tr.hand_shift is None else tr.hand_shift.detach().clone()
-                best = (sel, ({k: v.clone() for k, v in tr.G.state_dict().items()}, shift), it)
-        if point is not None:
-            curve.append({"iteration": it, **point})
-            if log:
-                log(point, it)
+            progress.update(n)
+        log_now = it % cfg.log_every == 0 or it == cfg.iterations
+        select_now = it % cfg.select_every == 0 or it == cfg.iterations
+        if not (log_now or select_now):
+            continue
+        for k in range(n):
+            point = None
+            if log_now:
+                cnt = cfg.log_every if it % cfg.log_every == 0 else it % cfg.log_every
+                point = {key: v / cnt for key, v in sums[k].items()}
+                sums[k] = {}
+            if holds[k] is not None and select_now:
+                one = tr.member(k)
+                with torch.no_grad():
+                    h = _Losses(one, dyn, cfg, tl)(*holds[k])
+                    sel = float(_Losses(one, dyn, cfg, tl).selection(h)[0])
+                point = point or {}
+                point.update({"heldout/selection_loss": sel, "heldout/dyn": float(h["dyn"][0]),
+                              "heldout/id": float(h["id"][0])})
+                if sel < best[k][0]:
+                    best[k] = (sel, one.state_dict(), it)
+            if point is not None:
+                curves[k].append({"iteration": it, **point})
+                if logs[k]:
+                    logs[k](point, it)
     wall = time.perf_counter() - t0
-    if best[1] is not None:
-        tr.G.load_state_dict(best[1][0])
-        if tr.hand_shift is not None:
-            with torch.no_grad():
-                tr.hand_shift.copy_(best[1][1])
-    final = {k: v for k, v in (curve[-1] if curve else {}).items() if k != "iteration"}
-    return tr.eval(), {"wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curve,
-                       "final": final, "selected_iteration": best[2] if best[1] is not None else cfg.iterations,
-                       "selected_heldout_loss": best[0] if best[1] is not None else None}
+    out_trs, out_stats = [], []
+    for k in range(n):
+        one = tr.member(k)
+        if best[k][1] is not None:  # the kept G (and hand offset); D stays the last iterate's
+            state = one.state_dict()
+            state.update({key: v for key, v in best[k][1].items() if not key.startswith("D.")})
+            one.load_state_dict(state)
+        one.cpu().eval()
+        final = {key: v for key, v in (curves[k][-1] if curves[k] else {}).items() if key != "iteration"}
+        out_trs.append(one)
+        out_stats.append({"wall_time_s": wall, "iterations_per_s": cfg.iterations / wall, "curve": curves[k],
+                          "final": final, "stack_size": n,
+                          "selected_iteration": best[k][2] if best[k][1] is not None else cfg.iterations,
+                          "selected_heldout_loss": best[k][0] if best[k][1] is not None else None})
+    return out_trs, out_stats
 
 
 def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorConfig,
                            demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
                            *, tl: TaskLayout, kinematics: Kinematics | None = None,
                            max_random: int = 20_000, seed: int = 0) -> dict:
-    """What the trained translator does, measured on demonstrations (not trained on) and random motion.
+    """What a trained translator (one member) does, measured on demonstrations (not trained on) and random motion.
 
     * ``dyn/*``: L_dyn split by the real robot's columns, the missing robot's and the object's;
     * ``D/*``: the discriminator's accuracy on translated demonstrations, on translated X random motion and on
@@ -625,28 +723,29 @@ def translator_diagnostics(tr: Translator, dyn: DynamicsModels, cfg: TranslatorC
         x0, x, x2, pidx = _normalised(tr, demos)
         h = losses(x0, x, x2, pidx)
         out.update({f"dyn/{k}": v for k, v in losses.dyn_split(h["dyn_sq"], pidx).items()})
-        out["dyn/all"] = float(h["dyn"])
-        out["id/real_robot"] = float(h["id"])
+        out["dyn/all"] = float(h["dyn"][0])
+        out["id/real_robot"] = float(h["id"][0])
         sub = {p: t.subset(torch.randperm(len(t.x), generator=gen)[:max_random // 2].numpy())
                for p, t in random_x.items()}
         xr0, xr, _, pr = _normalised(tr, sub)
         yr = tr.generate(xr, pr, xr0 if len(tr.fk_q) else None)
         y_real = dyn.y_norm(torch.as_tensor(y_random[torch.randperm(len(y_random), generator=gen)[:max_random]
-                                                       .numpy()]))
+                                                       .numpy()]))[None]
         out["D/accuracy_translated_demos"] = float((tr.disc(h["y_hat"]) < 0).float().mean())
         out["D/accuracy_translated_random"] = float((tr.disc(yr) < 0).float().mean())
         out["D/accuracy_real_y"] = float((tr.disc(y_real) > 0).float().mean())
+        pidx, y_hat, a_tilde = pidx[0], h["y_hat"][0], h["a_tilde"][0]
         if all(t.a is not None for t in demos.values()):
             n_a = len(tl.arm_action_columns("r1"))
             errs = []
             for p, t in demos.items():
                 m = pidx == PAIRING_INDEX[p]
-                a_hat = torch.clamp(h["a_tilde"][m], -1.0, 1.0)
+                a_hat = torch.clamp(a_tilde[m], -1.0, 1.0)
                 sl = slice(0, n_a) if layout.robot_arm(p) == "r1" else slice(n_a, 2 * n_a)
                 errs.append(((a_hat[:, sl] - torch.tensor(t.a)) ** 2).mean(dim=1))
             out["labels/real_robot_rmse"] = float(torch.cat(errs).mean().sqrt())
         if kinematics is not None:
-            y_raw = dyn.y_norm.inverse(h["y_hat"])
+            y_raw = dyn.y_norm.inverse(y_hat)
             for p in layout.PAIRINGS:
                 m = pidx == PAIRING_INDEX[p]
                 real = layout.robot_arm(p)

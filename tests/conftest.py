@@ -1,3 +1,5 @@
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before any test loads numpy or torch)
+
 import os
 from dataclasses import dataclass
 from pathlib import Path

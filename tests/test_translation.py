@@ -57,8 +57,8 @@ def test_skips_put_hand_and_object_where_they_belong(tiny):
     random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     tr = translation.Translator([16], TL)
     translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True, tl=TL)
-    torch.nn.init.zeros_(tr.G[-1].weight)
-    torch.nn.init.zeros_(tr.G[-1].bias)  # G's own output is 0: only the skips remain
+    torch.nn.init.zeros_(tr.G.layers[-1].weight)
+    torch.nn.init.zeros_(tr.G.layers[-1].bias)  # G's own output is 0: only the skips remain
     y_cols = box_layout.state_columns("Y")
     for p in layout.PAIRINGS:
         x = random_x[p].x[:5]
@@ -158,7 +158,7 @@ def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     x0, x, x2, pidx = translation._normalised(tr, random_x)
     full = translation._Losses(tr, dyn, TranslatorConfig(), TL)(x0, x, x2, pidx)
     none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), TL)(x0, x, x2, pidx)
-    obj = full["dyn_sq"][:, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[1]
+    obj = full["dyn_sq"][0, :, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[-1]
     assert float(none["dyn"].detach()) == pytest.approx(float((full["dyn"] - obj).detach()), rel=1e-4)
 
 
@@ -229,10 +229,10 @@ def test_discriminator_can_see_the_robots_only(tiny):
     for disc_input, n_in in (("state", 19), ("robots", 19 - n_obj)):
         tr, _ = translation.train_translator(random_x, random_x, y, dyn,
                                              cfg.model_copy(update={"disc_input": disc_input}), seed=0, tl=TL)
-        assert tr.D[0].in_features == n_in
-        yb = torch.randn(5, 19)
+        assert tr.D.layers[0].weight.shape[1] == n_in
+        yb = torch.randn(1, 5, 19)
         moved = yb.clone()
-        moved[:, -n_obj:] += 3.0
+        moved[..., -n_obj:] += 3.0
         same = torch.equal(tr.disc(yb), tr.disc(moved))
         assert same == (disc_input == "robots")
 
@@ -250,7 +250,7 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
         sizes: list[int] = []
 
         def counting_disc(self, yb, sizes=sizes):
-            sizes.append(len(yb))
+            sizes.append(yb.shape[1])
             return orig(self, yb)
 
         monkeypatch.setattr(translation.Translator, "disc", counting_disc)
@@ -282,8 +282,39 @@ def test_hand_offset_is_learnt_with_g_and_only_when_asked_for(tiny):
     with torch.no_grad():
         tr.hand_shift.zero_()
         out = losses(*batch)
-        hand = torch.gather(batch[1], 1, tr.hand_src[batch[3]]) * tr.hand_scale[batch[3]] + tr.hand_offset[batch[3]]
-        diff = torch.gather(out["y_hat"], 1, tr.hand_dst[batch[3]]) - hand
+        pidx = batch[3]
+        hand = torch.gather(batch[1], -1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]
+        diff = torch.gather(out["y_hat"], -1, tr.hand_dst[pidx]) - hand
         for i in range(len(layout.PAIRINGS)):
-            tr.hand_shift[i] = diff[batch[3] == i].mean(dim=0)
+            tr.hand_shift[0, i] = diff[pidx == i].mean(dim=0)
         assert float(losses(*batch)["hand"]) < float(out["hand"])
+
+
+def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
+    """The translators of several seeds train as one stacked model; each member's G, D, kept checkpoint and curve are
+    the same bits as when that seed trains alone (its own demonstrations and held-out split, its own draws)."""
+    env, paths, dyn = tiny
+    kin = box_push_kinematics(env)
+    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_layout.state_columns("Y")]]
+    y = y.to_numpy(np.float32).copy()
+    cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=10, select_every=10, batch_size=16,
+                           hand_offset=True, lambda_hand=1.0)
+    members = []
+    for seed in (4, 7, 11):
+        eps = {p: np.unique(t.episode) for p, t in random_x.items()}
+        pick = {p: t.subset(np.isin(t.episode, np.random.default_rng(seed).choice(eps[p], 6, replace=False)))
+                for p, t in random_x.items()}
+        train, held = translation.split_held_out(pick, 0.3, seed)
+        members.append(translation.Member(train, seed, held))
+    stacked, st_stats = translation.train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
+    for k, m in enumerate(members):
+        alone, stats = translation.train_translator(m.demos, random_x, y, dyn, cfg, m.seed, tl=TL, kinematics=kin,
+                                                    held_out=m.held_out)
+        a, b = alone.state_dict(), stacked[k].state_dict()
+        assert sorted(a) == sorted(b)
+        assert all(torch.equal(a[key], b[key]) for key in a), f"seed {m.seed}: not the same bits in a stack"
+        assert stats["curve"] == st_stats[k]["curve"]
+        assert stats["selected_iteration"] == st_stats[k]["selected_iteration"]
+    # and the members differ from each other (their seeds and data count)
+    assert not torch.equal(stacked[0].G.layers[0].weight, stacked[1].G.layers[0].weight)

@@ -40,6 +40,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from lfdt import data, layout
 from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig, ProgramConfig
+from lfdt.nets import pin_linear_layers
+from lfdt.optim import Adam
 from lfdt.seeding import episode_seed, seed_everything
 from lfdt.tasks.box_push import layout as box_layout
 from lfdt.tasks.box_push.env import BoxPushEnv
@@ -79,12 +81,18 @@ def make_vec_env(pairing: str, env_cfg: EnvConfig, demos_cfg: DemosConfig, n_env
 
 
 def build_sac(env, cfg: ExpertsConfig, buffer_size: int | None = None, device: str | torch.device = "cpu") -> SAC:
-    """An SAC agent with the configured networks and optimiser settings, its networks on ``device``."""
+    """An SAC agent with the configured networks and optimiser settings, its networks on ``device``.
+
+    Its linear layers and its optimisers are the project's (:func:`lfdt.nets.pin_linear_layers`,
+    :func:`lfdt.optim.Adam`), so that a gradient step is the same bits on every CPU (:mod:`lfdt.numerics`)."""
     model = SAC(
         "MlpPolicy", env, learning_rate=cfg.learning_rate, buffer_size=buffer_size or cfg.buffer_size,
         learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma, train_freq=1,
-        gradient_steps=cfg.gradient_steps, policy_kwargs={"net_arch": list(cfg.net_arch)}, seed=cfg.seed,
-        device=device, verbose=0)
+        gradient_steps=cfg.gradient_steps, policy_kwargs={"net_arch": list(cfg.net_arch), "optimizer_class": Adam},
+        seed=cfg.seed, device=device, verbose=0)
+    pin_linear_layers(model.policy)
+    # SB3 builds the entropy coefficient's optimiser itself, as torch's Adam
+    model.ent_coef_optimizer = Adam([model.log_ent_coef], lr=model.lr_schedule(1))
     # Our callback keeps the curve; without a logger of its own, SB3 makes an empty SB3-<date> folder in /tmp on
     # every learn().
     model.set_logger(Logger(folder=None, output_formats=[]))
