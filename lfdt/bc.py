@@ -237,3 +237,31 @@ class BCPolicy:
         if not members:
             raise FileNotFoundError(f"no policy (*.pt) in {model_dir}")
         return cls(members, tl, action_bounds), cfg
+
+
+class StackedPolicies:
+    """Several saved policies of one method (one per seed) acting as one: observations ``(policies, batch, obs)`` to
+    actions ``(policies, batch, act)``, each member a stack over the policies (one GEMM per policy and layer), so a
+    policy acts the same bits here as alone on the same batch."""
+
+    def __init__(self, policies: list[BCPolicy]):
+        if not policies:
+            raise ValueError("StackedPolicies needs at least one policy")
+        first = policies[0]
+        self.action_bounds = first.action_bounds
+        self._n_actions, self._in, self._out = first._n_actions, first._in, first._out
+        self.members = []
+        for j, m in enumerate(first.members):
+            ms = [p.members[j] for p in policies]
+            if any((x.in_columns, x.out_columns, x.hidden) != (m.in_columns, m.out_columns, m.hidden) for x in ms):
+                raise ValueError("StackedPolicies stacks policies of the same members and shapes only")
+            stack = BCMember(m.in_columns, m.out_columns, m.hidden, n=len(ms), init=False)
+            stack.load_state_dict({k: torch.cat([x.state_dict()[k] for x in ms]) for k in m.state_dict()})
+            self.members.append(stack.eval())
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        act = np.zeros((*y.shape[:2], self._n_actions))
+        with torch.no_grad():
+            for m, i, o in zip(self.members, self._in, self._out):
+                act[..., o] = m(torch.as_tensor(y[..., i], dtype=torch.float32)).numpy()
+        return act if self.action_bounds is None else np.clip(act, *self.action_bounds)

@@ -53,6 +53,58 @@ def rollout_trials(policy: Callable[[np.ndarray], np.ndarray], make_env: Callabl
     return results
 
 
+def rollout_lockstep(act: Callable[[np.ndarray], np.ndarray], make_env: Callable[[bool], object], policies: int,
+                     trials: int, videos: int = 0, video_dirs: list[Path] | None = None, progress=None,
+                     purpose: str = "evaluation") -> list[list[dict]]:
+    """Run ``policies`` policies from the fixed start states of ``purpose``, all trials of all policies in lockstep:
+    one call ``act(obs)`` per control step maps observations ``(policies, trials, obs)`` to actions ``(policies,
+    trials, act)``. Every call sees every trial, finished ones included (their actions are dropped), so a policy's
+    actions do not depend on which trials are still running, nor on the other policies. The first ``videos`` trials
+    of policy p are filmed into ``video_dirs[p]``.
+
+    Returns per policy, per trial: index, seed, success, steps and the last step's info (``final_info``).
+    """
+    seeds = evaluation_seeds(trials, purpose)
+    record = [[i < videos and video_dirs is not None for i in range(trials)] for _ in range(policies)]
+    envs = [[make_env(record[p][i]) for i in range(trials)] for p in range(policies)]
+    obs, frames = [], [[[] for _ in range(trials)] for _ in range(policies)]
+    for p in range(policies):
+        row = []
+        for i, env in enumerate(envs[p]):
+            o, _ = env.reset(seed=seeds[i])
+            row.append(o)
+            if record[p][i]:
+                frames[p][i].append(env.render())
+        obs.append(row)
+    obs = np.asarray(obs, dtype=float)
+    done = np.zeros((policies, trials), dtype=bool)
+    results = [[{"trial": i, "seed": seeds[i], "success": False, "steps": 0, "final_info": {}}
+                for i in range(trials)] for _ in range(policies)]
+    while not done.all():
+        actions = act(obs)
+        for p in range(policies):
+            for i in np.flatnonzero(~done[p]):
+                env = envs[p][i]
+                o, _, term, trunc, info = env.step(actions[p, i])
+                obs[p, i] = o
+                r = results[p][i]
+                r["steps"] += 1
+                r["success"], r["final_info"] = bool(term), info
+                if record[p][i]:
+                    frames[p][i].append(env.render())
+                if term or trunc:
+                    done[p, i] = True
+                    if progress is not None:
+                        progress.update(1)
+    for p in range(policies):
+        for i in range(trials):
+            if record[p][i]:
+                write_video(frames[p][i], Path(video_dirs[p]) / f"trial{i:02d}.mp4",
+                            fps=envs[p][i].metadata["render_fps"])
+            envs[p][i].close()
+    return results
+
+
 def write_video(frames: list[np.ndarray], path: Path, fps: int) -> Path:
     """Encode frames as H.264 mp4 (the ffmpeg binary comes with imageio-ffmpeg; no download)."""
     import imageio.v2 as imageio

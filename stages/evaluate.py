@@ -1,5 +1,5 @@
-"""DVC stage: run the BC policies of one (method, demos), every seed side by side, in domain Y from the fixed
-evaluation start states."""
+"""DVC stage: run the BC policies of one (method, demos), every seed, in domain Y from the fixed evaluation start
+states: the seeds split into ``grid.workers`` groups side by side, each group's trials stepped in lockstep."""
 
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
@@ -16,8 +16,9 @@ def run() -> None:
     group = cfgs[0].group
     (args.videos / group).mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos
     with stage.frame(args.reports / f"{group}.json") as f:
-        results = parallel.run_jobs(evaluate_job, cfgs, p.grid.workers, total=p.evaluation.trials * len(cfgs),
-                                    desc=f"evaluate {group}", unit="trial")
+        results = common.flatten(parallel.run_jobs(
+            evaluate_job, common.groups(cfgs, p.grid.workers), p.grid.workers,
+            total=p.evaluation.trials * len(cfgs), desc=f"evaluate {group}", unit="trial"))
         f.report.update(stage.group_report(results))
         stage.write_csv(args.reports / f"{group}_trials.csv", [t for r in results for t in r["trials"]])
     for r in results:

@@ -1,4 +1,5 @@
-"""DVC stage: behaviour cloning of one (method, demos), every seed side by side, from the BC training sets."""
+"""DVC stage: behaviour cloning of one (method, demos) for every seed, from the BC training sets. The seeds train as
+stacked models, split into ``grid.workers`` groups that run side by side."""
 
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
@@ -17,8 +18,9 @@ def run() -> None:
     group = cfgs[0].group
     members = 2 if methods.get(args.method).data == "raw" else 1
     with stage.frame(args.reports / f"{group}.json") as f:
-        results = parallel.run_jobs(bc_job, cfgs, p.grid.workers, total=p.bc.iterations * members * len(cfgs),
-                                    desc=f"BC {group}")
+        results = common.flatten(parallel.run_jobs(
+            bc_job, common.groups(cfgs, p.grid.workers), p.grid.workers, total=p.bc.iterations * members * len(cfgs),
+            desc=f"BC {group}", unit="seed-it"))
         f.report.update(stage.group_report(results))
         stage.write_csv(args.reports / f"{group}_curve.csv", [c for r in results for c in r["curve"]])
 

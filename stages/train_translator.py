@@ -1,5 +1,5 @@
-"""DVC stage: train the translator (G, D; eqs. 1-6) of one (method, demos) for every seed, side by side, and
-translate the demonstrations."""
+"""DVC stage: train the translators (G, D; eqs. 1-6) of one (method, demos) for every seed, and translate the
+demonstrations. The seeds train as stacked models, split into ``grid.workers`` groups that run side by side."""
 
 from lfdt import methods, parallel, stage, translation
 from lfdt.jobs import common
@@ -20,8 +20,9 @@ def run() -> None:
     group = cfgs[0].group
     tcfg = translation.method_config(args.method, p.translator)
     with stage.frame(args.reports / f"{group}.json") as f:
-        results = parallel.run_jobs(translator_job, cfgs, p.grid.workers,
-                                    total=tcfg.iterations * tcfg.restarts * len(cfgs), desc=f"translator {group}")
+        results = common.flatten(parallel.run_jobs(
+            translator_job, common.groups(cfgs, p.grid.workers), p.grid.workers,
+            total=tcfg.iterations * tcfg.restarts * len(cfgs), desc=f"translator {group}", unit="seed-it"))
         f.report.update(stage.group_report(results))
         # held-out losses are measured every select_every iterations, diagnostics every log_every
         stage.write_csv(args.reports / f"{group}_curve.csv", [c for r in results for c in r["curve"]])

@@ -1,7 +1,8 @@
-"""The behaviour-cloning job: one configuration's policy from its training set."""
+"""The behaviour-cloning job: the policies of a group of seeds of one configuration, trained as stacks."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import torch
@@ -24,26 +25,39 @@ def bc_tasks(cfg: Config) -> list[bc.BCTask]:
                         tl=TASK)
 
 
-def bc_job(cfg: Config, progress: Progress | None = None) -> dict:
-    """Behaviour cloning of one configuration from its training set."""
+def bc_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
+    """Behaviour cloning of a group of seeds of one configuration from their training sets: each member of the
+    method's policy (one, or one per robot) trains as a stack over the seeds. One result per seed, in order."""
     t0 = time.perf_counter()
-    p = stage.params(cfg.params)
+    p = stage.params(cfgs[0].params)
     bcfg = p.bc
     torch.set_num_threads(bcfg.torch_threads)
     device = torch_device(p.device)
-    tasks = bc_tasks(cfg)
-    with mlflow_runs.stage_run("train_bc", {"bc": bcfg.model_dump(), **cfg.tags(), "device": p.device},
-                               tags=cfg.tags(), run_name=f"{cfg.name} train_bc") as run:
-        members, metrics, curves = [], {}, []
-        for task in tasks:
-            member, st = bc.train_member(task, bcfg, cfg.seed, log=run.metrics, progress=progress, device=device)
-            members.append(member)
-            for c in st.pop("curve"):
-                curves.append({"seed": cfg.seed, "member": task.name,
-                               **{k.split("/")[-1]: v for k, v in c.items()}})
-            metrics.update({f"{task.name}/{k}": v for k, v in st.items()})
-        bc.BCPolicy(members, TASK).save(cfg.dir(cfg.policies_dir), {**cfg.tags(), "bc": bcfg.model_dump(),
-                                                      "members": [t.name for t in tasks]})
-        metrics.update({**cfg.tags(), "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id})
-        run.metrics(numeric(metrics))
-    return {"metrics": metrics, "curve": curves}
+    tasks = [bc_tasks(cfg) for cfg in cfgs]
+    names = [t.name for t in tasks[0]]
+    seeds = [cfg.seed for cfg in cfgs]
+    with contextlib.ExitStack() as runs_stack:
+        runs = [runs_stack.enter_context(mlflow_runs.stage_run(
+            "train_bc", {"bc": bcfg.model_dump(), **cfg.tags(), "device": p.device, "stack": seeds},
+            tags=cfg.tags(), run_name=f"{cfg.name} train_bc")) for cfg in cfgs]
+        members = [[] for _ in cfgs]
+        metrics = [{} for _ in cfgs]
+        curves = [[] for _ in cfgs]
+        for j, name in enumerate(names):
+            trained, stats = bc.train_members([t[j] for t in tasks], bcfg, seeds, [r.metrics for r in runs], progress,
+                                              device)
+            for k, (member, st) in enumerate(zip(trained, stats)):
+                members[k].append(member)
+                st = dict(st)
+                for c in st.pop("curve"):
+                    curves[k].append({"seed": seeds[k], "member": name,
+                                      **{key.split("/")[-1]: v for key, v in c.items()}})
+                metrics[k].update({f"{name}/{key}": v for key, v in st.items()})
+        results = []
+        for k, (cfg, run) in enumerate(zip(cfgs, runs)):
+            bc.BCPolicy(members[k], TASK).save(cfg.dir(cfg.policies_dir), {**cfg.tags(), "bc": bcfg.model_dump(),
+                                                                            "members": names})
+            metrics[k].update({**cfg.tags(), "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id})
+            run.metrics(numeric(metrics[k]))
+            results.append({"metrics": metrics[k], "curve": curves[k]})
+    return results

@@ -70,9 +70,28 @@ class Config:
 
 
 def configs(method: str, demos: int, seeds: list[int], params: str, **dirs: Path) -> list[Config]:
-    """The jobs of one matrix stage instance; ``dirs`` are :class:`Config`'s folders its jobs use."""
+    """The configurations of one matrix stage instance, one per seed; ``dirs`` are :class:`Config`'s folders its
+    jobs use."""
     methods.get(method)
     return [Config(method, demos, s, params, **dirs) for s in seeds]
+
+
+def groups(cfgs: list[Config], workers: int) -> list[list[Config]]:
+    """The configurations split into at most ``workers`` groups of consecutive seeds, as even as can be: a group is
+    one job, whose seeds train as one stacked model (a seed's result does not depend on its group)."""
+    n = max(1, min(workers, len(cfgs)))
+    size, extra = divmod(len(cfgs), n)
+    out, start = [], 0
+    for i in range(n):
+        end = start + size + (1 if i < extra else 0)
+        out.append(cfgs[start:end])
+        start = end
+    return [g for g in out if g]
+
+
+def flatten(results: list[list[dict]]) -> list[dict]:
+    """Per-seed results from per-group results, in seed order."""
+    return [r for group in results for r in group]
 
 
 IDENTIFIERS = frozenset({"demos", "seed"})

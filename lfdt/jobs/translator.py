@@ -1,7 +1,9 @@
-"""The translator job: train G and D of one configuration, translate its demonstrations, measure them."""
+"""The translator job: train G and D of a group of seeds of one configuration as one stacked model, translate each
+seed's demonstrations, measure them."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import torch
@@ -16,65 +18,91 @@ from lfdt.tasks.box_push import layout as box_layout
 from lfdt.tasks.box_push.env import arm_specs, replay_check
 
 
-def translator_job(cfg: Config, progress: Progress | None = None) -> dict:
-    """Train the translator of one configuration, translate its demonstrations, measure the translation."""
+def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
+    """Train the translators of a group of seeds of one configuration (each with its restarts) as one stack, then
+    translate each seed's demonstrations and measure the translation. One result per seed, in order."""
     t0 = time.perf_counter()
-    p = stage.params(cfg.params)
-    tcfg = translation.method_config(cfg.method, p.translator)
+    first = cfgs[0]
+    p = stage.params(first.params)
+    tcfg = translation.method_config(first.method, p.translator)
     torch.set_num_threads(tcfg.torch_threads)
     device = torch_device(p.device)
     kin = box_push_kinematics(p.env)
-    dyn = load_models(cfg.dynamics_dir / DYNAMICS_FILE)
-    demo_paths = {pr: cfg.demos_dir / f"{pr}.parquet" for pr in layout.PAIRINGS}
-    episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
-    demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=TASK, with_actions=True,
-                                                    kind="demos")
-                 for pr in layout.PAIRINGS}
-    demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
-    random_x = {pr: translation.load_x_transitions(cfg.random_dir / f"{pr}.parquet", pr, tl=TASK, kind="random")
+    dyn = load_models(first.dynamics_dir / DYNAMICS_FILE)
+    demo_paths = {pr: first.demos_dir / f"{pr}.parquet" for pr in layout.PAIRINGS}
+    random_x = {pr: translation.load_x_transitions(first.random_dir / f"{pr}.parquet", pr, tl=TASK, kind="random")
                 for pr in layout.PAIRINGS}
-    y_random = load_random_y(cfg.random_dir / "Y.parquet", TASK).y
-    with mlflow_runs.stage_run("train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device},
-                               tags=cfg.tags(), run_name=f"{cfg.name} train_translator") as run:
-        trs, all_stats = translation.train_restarts(demos, random_x, y_random, dyn, tcfg, cfg.seed, log=run.metrics,
-                                                    std_floor=p.dynamics.std_floor, progress=progress, tl=TASK,
-                                                    kinematics=kin, held_out=held, device=device)
+    y_random = load_random_y(first.random_dir / "Y.parquet", TASK).y
+    per_seed = []
+    for cfg in cfgs:
+        episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
+        demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=TASK, with_actions=True,
+                                                        kind="demos")
+                     for pr in layout.PAIRINGS}
+        demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
+        per_seed.append((episodes, demos_all, demos, held))
+    with contextlib.ExitStack() as runs_stack:
+        runs = [runs_stack.enter_context(mlflow_runs.stage_run(
+            "train_translator", {"translator": tcfg.model_dump(), **cfg.tags(), "device": p.device,
+                                 "stack": [c.seed for c in cfgs]},
+            tags=cfg.tags(), run_name=f"{cfg.name} train_translator")) for cfg in cfgs]
+        members, logs = [], []
+        for cfg, run, (_, _, demos, held) in zip(cfgs, runs, per_seed):
+            for r in range(tcfg.restarts):
+                members.append(translation.Member(demos, translation.restart_seed(cfg.seed, r), held))
+                logs.append(translation.restart_log(run.metrics, r))
+        trained, trained_stats = translation.train_translators(
+            members, random_x, y_random, dyn, tcfg, p.dynamics.std_floor, logs, progress, tl=TASK, kinematics=kin,
+            device=device)
+        results = []
+        for i, (cfg, run, (episodes, demos_all, _, held)) in enumerate(zip(cfgs, runs, per_seed)):
+            trs = trained[i * tcfg.restarts:(i + 1) * tcfg.restarts]
+            all_stats = trained_stats[i * tcfg.restarts:(i + 1) * tcfg.restarts]
+            results.append(_finish(cfg, run, trs, all_stats, episodes, demos_all, held, random_x, y_random, dyn,
+                                   tcfg, demo_paths, kin, p.env, t0))
+    return results
+
+
+def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_x, y_random, dyn, tcfg, demo_paths,
+            kin, env_cfg: EnvConfig, t0: float) -> dict:
+    """Save one seed's translators, translate its demonstrations, measure and log them."""
+    for r, tr in enumerate(trs):
+        save_state(tr, cfg.dir(cfg.translators_dir) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
+            **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
+            "init_seed": translation.restart_seed(cfg.seed, r),
+            "x_columns": {pr: translation.canonical_x_columns(pr, TASK) for pr in layout.PAIRINGS},
+            "y_columns": TASK.state_columns("Y"), "episodes": episodes,
+            "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
+    df = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
+                                     env_cfg.timestep * env_cfg.frame_skip, TASK)
+    table = translation.translated_table(df, {
+        "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
+        "source_episodes": episodes, "layout": box_layout.describe(),
+        "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
+                       f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
+        TASK)
+    data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["translated"])
+    with torch.no_grad():
+        replay = replay_check(df, env_cfg)
+        # G and D of each restart on their own; restart 0 under the plain names
+        diag = {}
         for r, tr in enumerate(trs):
-            save_state(tr, cfg.dir(cfg.translators_dir) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
-                **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
-                "init_seed": translation.restart_seed(cfg.seed, r),
-                "x_columns": {pr: translation.canonical_x_columns(pr, TASK) for pr in layout.PAIRINGS},
-                "y_columns": TASK.state_columns("Y"), "episodes": episodes,
-                "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
-        df = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
-                                         p.env.timestep * p.env.frame_skip, TASK)
-        table = translation.translated_table(df, {
-            "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
-            "source_episodes": episodes, "layout": box_layout.describe(),
-            "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
-                           f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
-            TASK)
-        data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["translated"])
-        with torch.no_grad():
-            replay = replay_check(df, p.env)
-            # G and D of each restart on their own; restart 0 under the plain names
-            diag = {}
-            for r, tr in enumerate(trs):
-                d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=TASK,
-                                                       kinematics=kin, seed=cfg.seed)
-                diag.update({translation.restart_key(r, k): v for k, v in d.items()})
-        diag.update(translation.translation_diagnostics(df, demo_paths, episodes, TASK))
-        stats = all_stats[0]
-        curve = stats.pop("curve")
-        restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
-        for r, st in enumerate(all_stats[1:], 1):
-            st.pop("curve")
-            restarts.update({translation.restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
-            restarts.update({translation.restart_key(r, k): v for k, v in st.items()})
-        metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
-                   **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
-                   "mlflow_run_id": run.run_id}
-        run.metrics(numeric(metrics))
+            d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=TASK,
+                                                   kinematics=kin, seed=cfg.seed)
+            diag.update({translation.restart_key(r, k): v for k, v in d.items()})
+    diag.update(translation.translation_diagnostics(df, demo_paths, episodes, TASK))
+    stats = dict(all_stats[0])
+    curve = stats.pop("curve")
+    restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
+    for r, st in enumerate(all_stats[1:], 1):
+        st = dict(st)
+        st.pop("curve")
+        restarts.update({translation.restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
+        restarts.update({translation.restart_key(r, k): v for k, v in st.items()})
+    metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
+               **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
+               "mlflow_run_id": run.run_id}
+    run.metrics(numeric(metrics))
     return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}
 
 

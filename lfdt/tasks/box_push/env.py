@@ -279,11 +279,13 @@ class BoxPushEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     def __init__(self, domain: str = "Y", config: EnvConfig | dict | None = None,
-                 render_mode: str | None = None, width: int = 480, height: int = 480):
+                 render_mode: str | None = None, width: int = 480, height: int = 480,
+                 scene: BoxPushModel | None = None):
         cfg = config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
         self.cfg = cfg
         self.domain = domain
-        self.scene = BoxPushModel(domain, cfg)
+        # many environments of one domain (a batched evaluation) can share one compiled scene
+        self.scene = scene if scene is not None else BoxPushModel(domain, cfg)
         self.model = self.scene.model
         self.data = mujoco.MjData(self.model)
         self.metadata = {**self.metadata, "render_fps": round(1 / self.scene.dt)}

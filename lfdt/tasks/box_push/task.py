@@ -12,7 +12,7 @@ from lfdt.tasks.box_push.layout import BOX_PUSH
 
 if TYPE_CHECKING:
     from lfdt.config import EnvConfig
-    from lfdt.tasks.box_push.env import BoxPushEnv
+    from lfdt.tasks.box_push.env import BoxPushEnv, BoxPushModel
 
 
 class BoxPush:
@@ -22,12 +22,12 @@ class BoxPush:
     layout = BOX_PUSH
 
     def make_env(self, domain: str, config: EnvConfig | dict | None = None, render_mode: str | None = None,
-                 size: int = 240) -> BoxPushEnv:
+                 size: int = 240, scene: BoxPushModel | None = None) -> BoxPushEnv:
         """The box push in ``domain`` (``config``: params ``env``, defaults if None), rendering ``size`` pixels
-        square."""
+        square; ``scene``: a compiled scene of that domain and config to share (many environments at once)."""
         from lfdt.tasks.box_push.env import BoxPushEnv
 
-        return BoxPushEnv(domain, config, render_mode=render_mode, width=size, height=size)
+        return BoxPushEnv(domain, config, render_mode=render_mode, width=size, height=size, scene=scene)
 
 
 TASK = BoxPush()
