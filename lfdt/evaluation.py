@@ -129,14 +129,34 @@ def seed_state_interval(outcomes: np.ndarray, level: float = 0.95) -> tuple[floa
     """Interval of the mean success rate that accounts for both the training seeds and the start states.
 
     ``outcomes`` is a (seeds, start states) array of 0/1 trial outcomes, every seed run from the same start
-    states (a crossed design). Seeds and start states are both treated as random draws: the variance of the
-    grand mean is estimated from the two-way ANOVA mean squares as (MS_seed + MS_state - MS_residual) / (S T)
-    (= var_seed / S + var_state / T + var_residual / (S T)), with Satterthwaite's degrees of freedom and a t
-    quantile. With one seed only the start-state and residual terms remain (a within-seed interval).
+    states (a crossed design). Seeds and start states are both treated as random draws (:func:`crossed_interval`).
+    With one seed only the start-state and residual terms remain (a within-seed interval).
+    """
+    lo, hi = crossed_interval(outcomes, level)
+    return (max(0.0, lo), min(1.0, hi))
+
+
+def paired_difference_interval(a: np.ndarray, b: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Interval of the mean difference of two methods' success, ``a - b``, run with the same seeds from the same
+    start states (both (seeds, start states) arrays of 0/1 outcomes): the pairing removes what the seeds' demonstration
+    subsets and the start states' difficulty share (:func:`crossed_interval` of the differences)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape:
+        raise ValueError(f"paired outcomes need the same seeds and start states, got {a.shape} and {b.shape}")
+    lo, hi = crossed_interval(a - b, level)
+    return (max(-1.0, lo), min(1.0, hi))
+
+
+def crossed_interval(values: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Interval of the grand mean of a (seeds, start states) array whose rows and columns are both random draws.
+
+    The variance of the grand mean is estimated from the two-way ANOVA mean squares as (MS_seed + MS_state -
+    MS_residual) / (S T) (= var_seed / S + var_state / T + var_residual / (S T)), with Satterthwaite's degrees of
+    freedom and a t quantile.
     """
     from scipy import stats
 
-    y = np.asarray(outcomes, dtype=float)
+    y = np.asarray(values, dtype=float)
     if y.ndim != 2 or y.size == 0:
         raise ValueError(f"outcomes must be a non-empty (seeds, start states) array, got shape {y.shape}")
     n_s, n_t = y.shape
@@ -161,4 +181,4 @@ def seed_state_interval(outcomes: np.ndarray, level: float = 0.95) -> tuple[floa
     if var <= 0:
         return (m, m)
     half = float(stats.t.ppf(0.5 + level / 2, max(df, 1.0))) * math.sqrt(var)
-    return (max(0.0, m - half), min(1.0, m + half))
+    return (m - half, m + half)

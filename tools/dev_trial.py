@@ -1,0 +1,176 @@
+"""One development trial: the matrix jobs of some methods and demo counts on development seeds and the development
+start states, with params changed as ``dvc exp run -S`` would, outside the DVC pipeline.
+
+For choosing settings without touching the evaluation start states (or the evaluation seeds): it runs the same jobs
+as the translator, select, track, BC and evaluation stages (``lfdt/jobs``), on the workspace's demonstrations,
+random motion and dynamics, writing into ``dev/<name>/`` (git-ignored), logging every job to MLflow (tagged with the
+trial's name), and appends one row per (method, demos) to ``docs/experiments/trials.csv``: the per-seed success
+rates, their mean and 95 % interval over seeds and start states, and the paired difference from BC without
+translation where it ran. Per-seed diagnostics (translator and BC) go to ``docs/experiments/<name>_seeds.csv``.
+
+    python tools/dev_trial.py --name baseline --demos 100 --methods lfdt bc_no_translation
+    python tools/dev_trial.py --name lr-decay --demos 100 --methods lfdt -S translator.lr_decay=cosine
+"""
+
+import lfdt.numerics  # noqa: F401
+
+import argparse
+import csv
+import datetime
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import yaml
+
+from lfdt import data, evaluation, layout, methods, numerics, parallel, stage
+from lfdt.config import validate_params
+from lfdt.jobs import common
+from lfdt.jobs.bc import bc_job
+from lfdt.jobs.evaluate import evaluate_job
+from lfdt.jobs.track import track_job
+from lfdt.jobs.translator import translator_job
+
+ROOT = Path(__file__).resolve().parents[1]
+DEV_SEEDS = list(range(40, 50))
+"""The development seed block of these trials (the evaluation seeds are grid.seeds, 100-109)."""
+
+
+def set_key(doc: dict, dotted: str, value: str) -> None:
+    keys = dotted.split(".")
+    for k in keys[:-1]:
+        if k not in doc:
+            raise SystemExit(f"-S {dotted}: no key {k!r} in params.yaml")
+        doc = doc[k]
+    if keys[-1] not in doc:
+        raise SystemExit(f"-S {dotted}: no key {keys[-1]!r} in params.yaml")
+    doc[keys[-1]] = yaml.safe_load(value)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--name", required=True)
+    ap.add_argument("--demos", type=int, nargs="+", default=[100])
+    ap.add_argument("--methods", nargs="+", default=["lfdt", "bc_no_translation"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=DEV_SEEDS)
+    ap.add_argument("-S", "--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--hypothesis", default="", help="what the trial tests, written before it runs")
+    ap.add_argument("--keep", action="store_true", help="keep dev/<name>/ (models and data) afterwards")
+    args = ap.parse_args()
+    if set(args.seeds) & set(stage.params(ROOT / "params.yaml").grid.seeds):
+        raise SystemExit("tools/dev_trial.py: the evaluation seeds (grid.seeds) are not for development")
+    root = ROOT / "dev" / args.name
+    shutil.rmtree(root, ignore_errors=True)
+    root.mkdir(parents=True)
+    doc = yaml.safe_load((ROOT / "params.yaml").read_text())
+    for kv in args.set:
+        key, _, value = kv.partition("=")
+        set_key(doc, key, value)
+    doc["grid"]["seeds"] = args.seeds
+    doc["evaluation"]["start_states"] = "development"
+    doc["evaluation"]["videos"] = 0
+    p = validate_params(doc)
+    params_path = root / "params.yaml"
+    params_path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    os.environ["DVC_EXP_NAME"] = f"dev-{args.name}"  # the MLflow runs' tag
+    dirs = {"demos_dir": ROOT / "data/demos", "random_dir": ROOT / "data/random",
+            "dynamics_dir": ROOT / "models/dynamics", "translators_dir": root / "translators",
+            "bc_data_dir": root / "bc_train", "policies_dir": root / "policies", "videos_dir": root / "videos"}
+    t0 = time.perf_counter()
+    wanted = [methods.get(m) for m in args.methods]
+    translators = sorted({m.translator for m in wanted if m.translator}, key=list(methods.METHODS).index)
+    rows, diag_rows = {}, []
+    for n in args.demos:
+        for tm in translators:
+            cfgs = common.configs(tm, n, args.seeds, str(params_path), **dirs)
+            res = common.flatten(parallel.run_jobs(translator_job, common.groups(cfgs, p.grid.workers),
+                                                   p.grid.workers, desc=f"translator {tm}-d{n}", unit="seed-it"))
+            for r in res:
+                diag_rows.append({"method": tm, "demos": n, "stage": "translator", **_flat(r["metrics"])})
+        for m in wanted:
+            cfgs = common.configs(m.name, n, args.seeds, str(params_path), **dirs)
+            if m.data == "raw":
+                for cfg in cfgs:
+                    for pairing in layout.PAIRINGS:
+                        path = dirs["demos_dir"] / f"{pairing}.parquet"
+                        eps = data.demo_subset(path, n, cfg.seed, pairing)
+                        table = pq.read_table(path)
+                        keep = table.column("episode_index").to_numpy()
+                        data.write_table(table.filter(np.isin(keep, eps)),
+                                         cfg.dir(dirs["bc_data_dir"]) / f"raw_{pairing}.parquet")
+            elif m.data == "executed":
+                parallel.run_jobs(track_job, cfgs, p.grid.workers, desc=f"track {m.name}-d{n}")
+            res = common.flatten(parallel.run_jobs(bc_job, common.groups(cfgs, p.grid.workers), p.grid.workers,
+                                                   desc=f"BC {m.name}-d{n}", unit="seed-it"))
+            for r in res:
+                diag_rows.append({"method": m.name, "demos": n, "stage": "bc", **_flat(r["metrics"])})
+            res = common.flatten(parallel.run_jobs(evaluate_job, common.groups(cfgs, p.grid.workers),
+                                                   p.grid.workers, desc=f"evaluate {m.name}-d{n}", unit="trial"))
+            outcomes = np.array([[t["success"] for t in r["trials"]] for r in res], dtype=float)
+            rows[(m.name, n)] = outcomes
+            for r, o in zip(res, outcomes):
+                diag_rows.append({"method": m.name, "demos": n, "stage": "evaluate", "seed": r["metrics"]["seed"],
+                                  "success_rate": float(o.mean())})
+            print(f"{m.name}-d{n}: {100 * outcomes.mean():.1f} % (per seed "
+                  f"{', '.join(f'{100 * x:.0f}' for x in outcomes.mean(axis=1))})", file=sys.stderr)
+    write_results(args, rows, diag_rows, time.perf_counter() - t0)
+    if not args.keep:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}/"))
+        elif isinstance(v, (int, float, str, bool)) or v is None:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
+    out_dir = ROOT / "docs" / "experiments"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    trials = out_dir / "trials.csv"
+    fields = ["date", "trial", "hypothesis", "changes", "method", "demos", "seeds", "start_states", "success_pct",
+              "ci_low_pct", "ci_high_pct", "worst_seed_pct", "per_seed_pct", "diff_vs_bc_no_translation_pct",
+              "diff_ci_low_pct", "diff_ci_high_pct", "cpu_model", "numerics", "wall_min"]
+    new = not trials.exists()
+    info = numerics.describe()
+    with trials.open("a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        if new:
+            w.writeheader()
+        for (m, n), o in rows.items():
+            lo, hi = evaluation.seed_state_interval(o)
+            per = o.mean(axis=1)
+            base = rows.get(("bc_no_translation", n))
+            dlo = dhi = diff = ""
+            if base is not None and m != "bc_no_translation":
+                d = o - base
+                diff = f"{100 * d.mean():.1f}"
+                a, b = evaluation.paired_difference_interval(o, base)
+                dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
+            w.writerow({"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
+                        "changes": " ".join(args.set), "method": m, "demos": n,
+                        "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
+                        "success_pct": f"{100 * o.mean():.1f}", "ci_low_pct": f"{100 * lo:.1f}",
+                        "ci_high_pct": f"{100 * hi:.1f}", "worst_seed_pct": f"{100 * per.min():.1f}",
+                        "per_seed_pct": " ".join(f"{100 * x:.1f}" for x in per),
+                        "diff_vs_bc_no_translation_pct": diff, "diff_ci_low_pct": dlo, "diff_ci_high_pct": dhi,
+                        "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"})
+    keys = sorted({k for r in diag_rows for k in r})
+    with (out_dir / f"{args.name}_seeds.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(diag_rows)
+    print(json.dumps({f"{m}-d{n}": round(100 * o.mean(), 1) for (m, n), o in rows.items()}), file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
