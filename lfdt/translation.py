@@ -642,13 +642,15 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
         opt_d.zero_grad(set_to_none=True)
         l_d.sum().backward()
         opt_d.step()
-        # --- G step
+        # --- G step (D frozen: its weight gradients would be thrown away)
+        tr.D.requires_grad_(False)
         l_adv = g_loss_fn(tr.disc(y_adv))
         loss = (cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
                 + cfg.lambda_hand * out["hand"])
         opt_g.zero_grad(set_to_none=True)
         loss.sum().backward()
         opt_g.step()
+        tr.D.requires_grad_(True)
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean(dim=(1, 2)) + (d_fake < 0).float().mean(dim=(1, 2)))
             values = torch.stack([l_d, l_adv, out["dyn"], out["id"], out["hand"], loss, acc]).detach().cpu().numpy()

@@ -1,5 +1,7 @@
 """DVC stage: fit the forward model F and the inverse model F^-1 on domain Y's random-motion data."""
 
+import os
+
 from lfdt import dynamics, stage
 from lfdt.jobs.common import DYNAMICS_FILE
 from lfdt.nets import save_state, torch_device
@@ -16,9 +18,9 @@ def run() -> None:
     d = dynamics.load_random_y(str(args.random_dir / "Y.parquet"), box_layout.BOX_PUSH)
     with stage.frame(args.report, "fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
                      tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as f:
-        with f.progress(cfg.iterations, "F and F^-1", "it") as bar:
-            models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: f.metrics(m, i), progress=bar,
-                                                device=device)
+        # F and F^-1 side by side in two processes when there are two cores: the same bits as one after the other
+        models, res = dynamics.fit_dynamics(d, cfg, log=lambda m, i: f.metrics(m, i), device=device,
+                                            workers=min(2, os.cpu_count() or 1))
         curve = res.pop("curve")
         save_state(models, args.out_dir / DYNAMICS_FILE, {
             "dynamics": cfg.model_dump(), "state_columns": box_layout.state_columns("Y"),

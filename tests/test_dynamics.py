@@ -89,3 +89,14 @@ def test_normalised_actions_learn_millimetre_targets_and_round_trip(tmp_path):
 def test_raw_actions_keep_the_state_dict_of_before():
     assert not any(k.startswith("a_norm") for k in DynamicsModels(7, 4, [8]).state_dict())
     assert {"a_norm.mean", "a_norm.std"} <= set(DynamicsModels(7, 4, [8], normalise_actions=True).state_dict())
+
+
+def test_f_and_f_inverse_side_by_side_are_the_same_bits_as_one_after_the_other(random_y):
+    cfg = DynamicsConfig(hidden=[32, 32], iterations=120, eval_every=40, batch_size=32)
+    serial, res_s = fit_dynamics(random_y, cfg)
+    parallel, res_p = fit_dynamics(random_y, cfg, workers=2)
+    a, b = serial.state_dict(), parallel.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert res_s["forward_mse"] == res_p["forward_mse"] and res_s["inverse_mse"] == res_p["inverse_mse"]
+    assert [c["iteration"] for c in res_p["curve"]] == [40, 80, 120]
+    assert res_s["curve"][-1]["val/inverse_mse"] == res_p["curve"][-1]["val/inverse_mse"]
