@@ -375,6 +375,9 @@ class TranslatorConfig(Strict):
     32; 128 made translations that BC could use more often on the development start states: README)."""
     iterations: PosInt = 6_000
     """Gradient steps of G (and of D)."""
+    lr_decay: Literal["none", "cosine", "linear"] = "none"
+    """Learning rate of G and D over the iterations: constant ('none', the paper's Adam), or decayed to 0 along a
+    half cosine or a straight line, so that the last iterates change little."""
     object: Literal["translate", "correct", "copy"] = "copy"
     """How y_hat^O is made: G's output ('translate', as in the paper), G's correction added to x^O ('correct'), or
     x^O itself ('copy': the same object, seen alike in both domains). The robot's columns never have such a

@@ -21,6 +21,7 @@ never read.
 from __future__ import annotations
 
 import copy
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -583,6 +584,16 @@ def train_restarts(demos: dict[str, Transitions], random_x: dict[str, Transition
                              logs=[restart_log(log, r) for r in range(cfg.restarts)], **kwargs)
 
 
+def lr_factor(kind: str, it: int, iterations: int) -> float:
+    """The learning rate's share at iteration ``it`` (1-based) of ``iterations`` (``translator.lr_decay``)."""
+    frac = (it - 1) / iterations
+    if kind == "cosine":
+        return 0.5 * (1.0 + math.cos(math.pi * frac))
+    if kind == "linear":
+        return 1.0 - frac
+    return 1.0
+
+
 def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], random_x: dict[str, Transitions],
                  y_random: np.ndarray, cfg: TranslatorConfig, gens: list[torch.Generator],
                  logs: list[Callable[[dict, int], None] | None], progress, tl: TaskLayout,
@@ -607,6 +618,10 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
     curves: list[list[dict]] = [[] for _ in members]
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
+        if cfg.lr_decay != "none":
+            for opt in (opt_g, opt_d):
+                for group in opt.param_groups:
+                    group["lr"] = cfg.learning_rate * lr_factor(cfg.lr_decay, it, cfg.iterations)
         batch = []
         for k in range(n):
             xd0, xd, xd2, pd_ = demo_s[k].sample(quarter)

@@ -318,3 +318,11 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
         assert stats["selected_iteration"] == st_stats[k]["selected_iteration"]
     # and the members differ from each other (their seeds and data count)
     assert not torch.equal(stacked[0].G.layers[0].weight, stacked[1].G.layers[0].weight)
+
+
+def test_learning_rate_decays_as_asked():
+    assert translation.lr_factor("none", 500, 1000) == 1.0
+    assert translation.lr_factor("cosine", 1, 1000) == 1.0 and translation.lr_factor("linear", 1, 1000) == 1.0
+    assert translation.lr_factor("cosine", 501, 1000) == pytest.approx(0.5)
+    assert translation.lr_factor("linear", 1000, 1000) == pytest.approx(0.001)
+    assert translation.lr_factor("cosine", 1000, 1000) < 1e-4
