@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: help setup reproduce test lint smoke benchmarks mlflow-ui ui-check clean-venv
+.PHONY: help setup reproduce test lint smoke benchmarks docs cross-cpu mlflow-ui ui-check clean-venv
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 14
@@ -33,11 +33,19 @@ smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a tem
 lint: setup  ## ruff
 	$(BIN)/ruff check lfdt stages tests benchmarks tools
 
-benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/results/, numbers in the README)
+benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/results/, numbers in docs/benchmarks.md)
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/stack_throughput.py
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/pin_cost.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/collect_throughput.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/training_throughput.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/parallel_speedup.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/sweep_vs_repro.py
+
+docs: setup  ## write the numbers of README.md and docs/ from reports/ and benchmarks/results/
+	$(BIN)/python -m lfdt.docs
+
+cross-cpu: setup  ## the numeric fingerprint on this CPU and on CPUs emulated by QEMU (needs qemu-user)
+	$(BIN)/python tools/cross_cpu.py --models Haswell EPYC Skylake-Client EPYC-Rome
 
 mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000 (prints the URLs of Table I's views first)
 	$(BIN)/python -m lfdt.mlflow_views --ui http://127.0.0.1:5000

@@ -12,6 +12,8 @@ Bar (issue 2): collect / raw >= 0.8. Writes benchmarks/results/collect_throughpu
 
 from __future__ import annotations
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import argparse
 import json
 import os

@@ -11,6 +11,8 @@ nothing else changed between them. Writes benchmarks/results/noop_shapes.json.
 
 from __future__ import annotations
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import argparse
 import io
 import json

@@ -9,6 +9,8 @@ the servers is not counted. Writes benchmarks/results/sweep_vs_repro.json.
 
 from __future__ import annotations
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import argparse
 import json
 import os

@@ -11,6 +11,8 @@ Writes benchmarks/results/training_throughput.json.
 
 from __future__ import annotations
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import argparse
 import json
 import platform

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from lfdt import methods
-from lfdt.evaluation import PAPER_TRIALS, seed_state_interval
+from lfdt.evaluation import PAPER_TRIALS, paired_difference_interval, seed_state_interval
 
 
 def method_order() -> list[str]:
@@ -54,23 +54,39 @@ def aggregate(trials: pd.DataFrame) -> pd.DataFrame:
     """Per (method, demos): mean success over seeds and start states, per-seed rates, an interval over both seeds
     and start states, the same on the paper's 20-trial protocol (the first 20 start states), and the paper's."""
     out = []
+    mats = {}
     for (m, d), g in trials.groupby(["method", "demos"], sort=False):
         seeds = sorted(g.seed.unique())
         mat = np.array([g[g.seed == s].sort_values("trial").success.to_numpy(float) for s in seeds])
         if len({len(r) for r in mat}) != 1:
             raise ValueError(f"{m} with {d} demos: seeds were evaluated on different numbers of start states")
+        mats[(m, int(d))] = (seeds, mat)
+    for (m, d), (seeds, mat) in mats.items():
         lo, hi = seed_state_interval(mat)
         first = mat[:, :PAPER_TRIALS]
         lo20, hi20 = seed_state_interval(first)
         paper = methods.get(m).paper.get(int(d))
-        out.append({"method": m, "demos": int(d), "start_states": ",".join(sorted(set(g.start_states))),
-                    "seeds": len(seeds), "trials_per_seed": mat.shape[1],
-                    "trials": int(mat.size), "successes": int(mat.sum()), "success_rate": float(mat.mean()),
-                    "per_seed": ";".join(f"{r:.3f}" for r in mat.mean(axis=1)), "ci95_low": lo, "ci95_high": hi,
-                    f"success_rate_first{PAPER_TRIALS}": float(first.mean()), f"first{PAPER_TRIALS}_ci95_low": lo20,
-                    f"first{PAPER_TRIALS}_ci95_high": hi20,
-                    "paper_success_rate": float("nan") if paper is None else paper / 100})
+        row = {"method": m, "demos": int(d), "start_states": ",".join(sorted(set(trials[
+                   (trials.method == m) & (trials.demos == d)].start_states))),
+               "seeds": len(seeds), "trials_per_seed": mat.shape[1],
+               "trials": int(mat.size), "successes": int(mat.sum()), "success_rate": float(mat.mean()),
+               "per_seed": ";".join(f"{r:.3f}" for r in mat.mean(axis=1)), "ci95_low": lo, "ci95_high": hi,
+               "worst_seed": float(mat.mean(axis=1).min()),
+               f"success_rate_first{PAPER_TRIALS}": float(first.mean()), f"first{PAPER_TRIALS}_ci95_low": lo20,
+               f"first{PAPER_TRIALS}_ci95_high": hi20,
+               "paper_success_rate": float("nan") if paper is None else paper / 100,
+               "diff_vs_bc_no_translation": float("nan"), "diff_ci95_low": float("nan"),
+               "diff_ci95_high": float("nan")}
+        base = mats.get((BASELINE, d))
+        if m != BASELINE and base is not None and base[0] == seeds:
+            row["diff_vs_bc_no_translation"] = float((mat - base[1]).mean())
+            row["diff_ci95_low"], row["diff_ci95_high"] = paired_difference_interval(mat, base[1])
+        out.append(row)
     return _ordered(pd.DataFrame(out)).reset_index(drop=True)
+
+
+BASELINE = "bc_no_translation"
+"""The row every other is compared with, paired (the same seeds and start states)."""
 
 
 def _pct(x: float) -> str:
@@ -92,8 +108,12 @@ def markdown(table: pd.DataFrame) -> str:
                 cells += ["–", "–", _pct(float("nan") if paper is None else paper / 100)]
                 continue
             r = r.iloc[0]
-            per_seed = ", ".join(f"{100 * float(v):.0f}" for v in r.per_seed.split(";"))
-            cells.append(f"**{_pct(r.success_rate)}** ({per_seed}; {100 * r.ci95_low:.0f}–{100 * r.ci95_high:.0f})")
+            if r.seeds <= 3:
+                per_seed = ", ".join(f"{100 * float(v):.0f}" for v in r.per_seed.split(";"))
+                cells.append(f"**{_pct(r.success_rate)}** ({per_seed}; {100 * r.ci95_low:.0f}–{100 * r.ci95_high:.0f})")
+            else:
+                cells.append(f"**{_pct(r.success_rate)}** ({100 * r.ci95_low:.0f}–{100 * r.ci95_high:.0f}; worst seed "
+                             f"{100 * r.worst_seed:.0f})")
             cells.append(_pct(r[f"success_rate_first{PAPER_TRIALS}"]))
             cells.append(_pct(r.paper_success_rate))
         lines.append(f"| {methods.get(m).title} | " + " | ".join(cells) + " |")
@@ -101,12 +121,36 @@ def markdown(table: pd.DataFrame) -> str:
     per_seed = int(table.trials_per_seed.max())
     block = "" if "start_states" not in table or set(table.start_states) == {"evaluation"} else \
         " **Development start states** (not the evaluation block): for choosing settings, not for reporting."
+    bracket = "the per-seed rates in % and " if n_seeds <= 3 else ""
     lines += ["", f"Success rate over {per_seed} start states per seed (the same states for every row), mean over "
-              f"{n_seeds} seed(s) (n = {n_seeds * per_seed} trials per cell); in brackets the per-seed rates in % and "
+              f"{n_seeds} seed(s) (n = {n_seeds * per_seed} trials per cell); in brackets {bracket}"
               "a 95 % interval that counts both the seeds and the start states as random (two-way random effects, "
-              f"t with Satterthwaite's degrees of freedom). 'First {PAPER_TRIALS}': the paper's protocol "
+              f"t with Satterthwaite's degrees of freedom){'' if n_seeds <= 3 else ' and the worst seed'}. "
+              f"'First {PAPER_TRIALS}': the paper's protocol "
               f"({PAPER_TRIALS} trials per seed), on the first start states of the same list. "
               "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper." + block]
+    return "\n".join(lines) + "\n"
+
+
+def differences_markdown(table: pd.DataFrame) -> str:
+    """Each method against BC without translation, paired (the same seeds and start states): the mean difference in
+    success and its 95 % interval, per demo count."""
+    demos = sorted(table.demos.unique())
+    rows = [m for m in method_order() if m in set(table.method) and m != BASELINE]
+    lines = ["| method | " + " | ".join(f"{d} demos" for d in demos) + " |", "| --- |" + " --- |" * len(demos)]
+    for m in rows:
+        cells = []
+        for d in demos:
+            r = table[(table.method == m) & (table.demos == d)]
+            if r.empty or r.iloc[0].diff_vs_bc_no_translation != r.iloc[0].diff_vs_bc_no_translation:
+                cells.append("–")
+                continue
+            r = r.iloc[0]
+            cells.append(f"{100 * r.diff_vs_bc_no_translation:+.1f} ({100 * r.diff_ci95_low:+.1f} to "
+                         f"{100 * r.diff_ci95_high:+.1f})")
+        lines.append(f"| {methods.get(m).title} | " + " | ".join(cells) + " |")
+    lines += ["", f"Difference from {methods.get(BASELINE).title} in points of success, the same seeds and start "
+              "states (paired), with its 95 % interval over both (two-way random effects)."]
     return "\n".join(lines) + "\n"
 
 

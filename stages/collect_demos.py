@@ -1,5 +1,7 @@
 """DVC stage: roll out the SAC expert of one pairing until enough successful demonstrations."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import data, layout, stage
 from lfdt.tasks.box_push import experts
 from lfdt.tasks.box_push import layout as box_layout

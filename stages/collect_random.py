@@ -1,5 +1,7 @@
 """DVC stage: collect random-motion transitions in one domain (batched MuJoCo rollouts) to Parquet."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import data, layout, stage
 from lfdt.tasks.box_push import layout as box_layout
 from lfdt.tasks.box_push import random_motion

@@ -1,6 +1,8 @@
 """DVC stage: run the BC policies of one (method, demos), every seed, in domain Y from the fixed evaluation start
 states: the seeds split into ``grid.workers`` groups side by side, each group's trials stepped in lockstep."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
 from lfdt.jobs.evaluate import evaluate_job

@@ -1,5 +1,7 @@
 """DVC stage: fit the forward model F and the inverse model F^-1 on domain Y's random-motion data."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import os
 
 from lfdt import dynamics, stage

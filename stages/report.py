@@ -1,6 +1,8 @@
 """DVC stage: Table I (md, csv, tex, and its headline rates as the metrics file), per-run CSV, plots that overlay the
 methods, translator diagnostics, stage wall times, and one MLflow parent run that carries them."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import json
 from pathlib import Path
 
@@ -39,7 +41,7 @@ def run() -> None:
     table = report.aggregate(trials)
     stage.write_csv(reports / "table1_runs.csv", run_rows.to_dict("records"))
     stage.write_csv(reports / "table1.csv", table.to_dict("records"))
-    (reports / "table1.md").write_text(report.markdown(table))
+    (reports / "table1.md").write_text(report.markdown(table) + "\n" + report.differences_markdown(table))
     (reports / "table1.tex").write_text(report.latex(table))
     stage.write_csv(reports / "success_vs_demos.csv", run_rows[["method", "demos", "seed", "success_rate"]]
                     .to_dict("records"))
@@ -92,6 +94,7 @@ def run() -> None:
     stage.write_report(reports / "table1.json", {**headline, "mlflow_parent_run_id": parent_id,
                                                  "mlflow_child_runs": adopted, "total_stage_wall_s": total_wall})
     print(report.markdown(table))
+    print(report.differences_markdown(table))
     print(times.to_string(index=False))
 
 

@@ -1,5 +1,7 @@
 """DVC stage: the raw demonstration subsets of one demo count, every seed, for BC without translation."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import pyarrow.parquet as pq
 
 from lfdt import data, layout, stage

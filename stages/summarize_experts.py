@@ -1,6 +1,8 @@
 """DVC stage: reports/experts.json, one entry per pairing (expert evaluation + demonstration statistics), and the
 protocol's premise measured: both robots replaying their programs together in Y, nobody adapting."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import layout, stage
 from lfdt.tasks.box_push import programmed
 

@@ -1,6 +1,8 @@
 """DVC stage: re-execute the translated demonstrations of one (method, demos) in Y, every seed side by side
 (the lfdt_track row; our extension)."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
 from lfdt.jobs.track import track_job

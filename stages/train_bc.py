@@ -1,6 +1,8 @@
 """DVC stage: behaviour cloning of one (method, demos) for every seed, from the BC training sets. The seeds train as
 stacked models, split into ``grid.workers`` groups that run side by side."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import methods, parallel, stage
 from lfdt.jobs import common
 from lfdt.jobs.bc import bc_job

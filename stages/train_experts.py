@@ -1,5 +1,7 @@
 """DVC stage: train the SAC experts of both pairings side by side (each resumable), evaluate them on fresh seeds."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import layout, parallel, stage
 from lfdt.jobs.experts import ExpertJob, expert_job
 from lfdt.nets import torch_device

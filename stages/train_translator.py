@@ -1,6 +1,8 @@
 """DVC stage: train the translators (G, D; eqs. 1-6) of one (method, demos) for every seed, and translate the
 demonstrations. The seeds train as stacked models, split into ``grid.workers`` groups that run side by side."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import methods, parallel, stage, translation
 from lfdt.jobs import common
 from lfdt.jobs.translator import translator_job

@@ -1,5 +1,7 @@
 """DVC stage: random motion and demonstrations of one real-robot task, from the twin or from robot recordings."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import shutil
 
 from lfdt import parallel, stage

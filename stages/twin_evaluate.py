@@ -1,5 +1,7 @@
 """DVC stage: trials of LfDT and BC without translation on one real-robot task (twin, or the robots' deploy logs)."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from pathlib import Path
 
 from lfdt import parallel, stage, twin

@@ -1,5 +1,7 @@
 """DVC stage: reports/twin_runs.csv and reports/twin.md, our results beside the paper's real-robot numbers."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import json
 
 import numpy as np

@@ -1,6 +1,8 @@
 """DVC stage: dynamics, translator and BC (LfDT and BC without translation) for one real-robot task, its seeds side
 by side."""
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 from lfdt import parallel, stage
 from lfdt.errors import StageError
 from lfdt.nets import torch_device

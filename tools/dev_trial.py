@@ -61,6 +61,8 @@ def main() -> None:
     ap.add_argument("-S", "--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--hypothesis", default="", help="what the trial tests, written before it runs")
     ap.add_argument("--keep", action="store_true", help="keep dev/<name>/ (models and data) afterwards")
+    ap.add_argument("--baseline-from", help="pair with BC without translation of this earlier trial (same seeds, "
+                                            "same start states; it does not depend on the translator's params)")
     args = ap.parse_args()
     if set(args.seeds) & set(stage.params(ROOT / "params.yaml").grid.seeds):
         raise SystemExit("tools/dev_trial.py: the evaluation seeds (grid.seeds) are not for development")
@@ -113,6 +115,7 @@ def main() -> None:
                                                    p.grid.workers, desc=f"evaluate {m.name}-d{n}", unit="trial"))
             outcomes = np.array([[t["success"] for t in r["trials"]] for r in res], dtype=float)
             rows[(m.name, n)] = outcomes
+            save_outcomes(args.name, m.name, n, args.seeds, outcomes)
             for r, o in zip(res, outcomes):
                 diag_rows.append({"method": m.name, "demos": n, "stage": "evaluate", "seed": r["metrics"]["seed"],
                                   "success_rate": float(o.mean())})
@@ -121,6 +124,28 @@ def main() -> None:
     write_results(args, rows, diag_rows, time.perf_counter() - t0)
     if not args.keep:
         shutil.rmtree(root, ignore_errors=True)
+
+
+OUTCOMES = ROOT / "docs" / "experiments" / "outcomes"
+"""Every trial's 0/1 outcomes, one file per (trial, method, demos): a later trial pairs with them."""
+
+
+def save_outcomes(trial: str, method: str, demos: int, seeds: list[int], outcomes: np.ndarray) -> None:
+    OUTCOMES.mkdir(parents=True, exist_ok=True)
+    with (OUTCOMES / f"{trial}_{method}-d{demos}.csv").open("w") as f:
+        f.write("seed,outcomes\n")
+        for s, o in zip(seeds, outcomes):
+            f.write(f"{s},{''.join(str(int(x)) for x in o)}\n")
+
+
+def load_outcomes(trial: str, method: str, demos: int, seeds: list[int]) -> np.ndarray | None:
+    path = OUTCOMES / f"{trial}_{method}-d{demos}.csv"
+    if not path.exists():
+        return None
+    rows = dict(line.strip().split(",") for line in path.read_text().splitlines()[1:])
+    if sorted(int(s) for s in rows) != sorted(seeds):
+        return None
+    return np.array([[int(c) for c in rows[str(s)]] for s in seeds], dtype=float)
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -150,6 +175,8 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
             lo, hi = evaluation.seed_state_interval(o)
             per = o.mean(axis=1)
             base = rows.get(("bc_no_translation", n))
+            if base is None and args.baseline_from:
+                base = load_outcomes(args.baseline_from, "bc_no_translation", n, args.seeds)
             dlo = dhi = diff = ""
             if base is not None and m != "bc_no_translation":
                 d = o - base

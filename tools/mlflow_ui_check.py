@@ -10,6 +10,8 @@ or the store is missing.
 
 from __future__ import annotations
 
+import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
+
 import argparse
 import html
 import os

@@ -1,0 +1,184 @@
+"""The numbers in the README and in docs/, written from reports/ and benchmarks/results/ (never by hand).
+
+A page holds generated blocks between ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->``; this module
+renders each block from the files it names and puts it in place. ``python -m lfdt.docs`` rewrites the pages
+(``make docs``); ``python -m lfdt.docs --check`` exits 1 naming every block that differs from what the reports say
+(``tests/test_docs.py`` runs it, so a page can never disagree with its reports).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = ("README.md", "docs/results.md", "docs/experiments.md", "docs/benchmarks.md")
+"""The pages that hold generated blocks."""
+
+
+def _read_json(path: Path) -> dict:
+    if not path.exists():
+        raise FileNotFoundError(f"{path.relative_to(ROOT)} is missing: run the pipeline (or the tool that writes it)")
+    return json.loads(path.read_text())
+
+
+def table1(root: Path) -> str:
+    """Table I and the paired differences, as the report stage wrote them (reports/table1.md)."""
+    return (root / "reports" / "table1.md").read_text().strip()
+
+
+def headline(root: Path) -> str:
+    """LfDT and BC without translation in one sentence per demo count, from reports/table1.csv."""
+    rows = list(csv.DictReader((root / "reports" / "table1.csv").open()))
+    by = {(r["method"], int(r["demos"])): r for r in rows}
+    parts = []
+    for d in sorted({int(r["demos"]) for r in rows}):
+        a, b = by.get(("lfdt", d)), by.get(("bc_no_translation", d))
+        if a is None or b is None:
+            continue
+        pct = {k: 100 * float(a[k]) for k in ("success_rate", "worst_seed", "ci95_low", "ci95_high",
+                                               "diff_vs_bc_no_translation", "diff_ci95_low", "diff_ci95_high")}
+        parts.append(f"{d} demos: LfDT **{pct['success_rate']:.1f} %** (worst seed {pct['worst_seed']:.0f} %, "
+                     f"interval {pct['ci95_low']:.0f}–{pct['ci95_high']:.0f}), BC without translation "
+                     f"{100 * float(b['success_rate']):.1f} %, difference {pct['diff_vs_bc_no_translation']:+.1f} "
+                     f"points ({pct['diff_ci95_low']:+.1f} to {pct['diff_ci95_high']:+.1f})")
+    seeds = rows[0]["seeds"] if rows else "?"
+    trials = rows[0]["trials_per_seed"] if rows else "?"
+    return (f"Over {seeds} training seeds x {trials} evaluation start states per cell: " + "; ".join(parts) + ".")
+
+
+def cross_cpu(root: Path) -> str:
+    """Where the committed fingerprint was reproduced (reports/cross_cpu.json, reports/fingerprint.json)."""
+    doc = _read_json(root / "reports" / "cross_cpu.json")
+    fp = _read_json(root / "reports" / "fingerprint.json")
+    lines = ["| CPU (as /proc/cpuinfo or QEMU names it) | vector ISA | numerics | same bits as the committed "
+             "fingerprint |", "| --- | --- | --- | --- |"]
+    for r in doc["runs"]:
+        if r["emulated_model"]:
+            cpu, isa = f"QEMU `-cpu {r['emulated_model']}` on {doc['host_cpu_model']}", "AVX2 (emulated)"
+        else:
+            cpu, isa = doc["host_cpu_model"], doc["host_cpu_isa"].upper().replace("AVX512", "AVX-512")
+        n_same = sum(r["matches_committed"].values())
+        verdict = "yes, all components" if r["all_match"] else \
+            f"no ({n_same}/{len(r['matches_committed'])} components)"
+        lines.append(f"| {cpu} | {isa} | {r['numerics']} | {verdict} |")
+    libs = ", ".join(f"{k} {v}" for k, v in sorted(fp["versions"].items()))
+    lines += ["", f"Measured {doc['date']} with `python tools/cross_cpu.py` ({doc['qemu']}); components "
+              f"{', '.join(sorted(fp['components']))}; libraries {libs}."]
+    return "\n".join(lines)
+
+
+def run_time(root: Path) -> str:
+    """The full pipeline's wall time per stage (reports/stage_times.csv) and in all (reports/run_time.json)."""
+    doc = _read_json(root / "reports" / "run_time.json")
+    rows = list(csv.DictReader((root / "reports" / "stage_times.csv").open()))
+    lines = ["| stage | runs | minutes |", "| --- | --- | --- |"]
+    for r in rows:
+        lines.append(f"| {r['stage']} | {r['runs']} | {float(r['total_s']) / 60:.1f} |")
+    lines += ["", f"A full `dvc repro` from a clean clone took **{doc['minutes']:.1f} min** on {doc['cpu_model']} "
+              f"({doc['cores']} cores, {doc['date']}, commit {doc['commit'][:7]}); the stages' own processes sum to "
+              f"{sum(float(r['total_s']) for r in rows) / 60:.1f} min, the rest is DVC's."]
+    return "\n".join(lines)
+
+
+def benchmarks(root: Path) -> str:
+    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json)."""
+    res = root / "benchmarks" / "results"
+    lines = ["| benchmark | ours | baseline | ratio | goal |", "| --- | --- | --- | --- | --- |"]
+    st = _read_json(res / "stack_throughput.json")
+    for name in ("translator", "bc", "evaluate"):
+        r = st[name]
+        lines.append(f"| {name}: {st['seeds']} seeds stacked vs one at a time ({r['unit']}/s, one core) | "
+                     f"{r['per_s']['stacked']:.0f} | {r['per_s']['one_at_a_time']:.0f} | **{r['speedup']:.2f}** | 4 |")
+    pc = _read_json(res / "pin_cost.json")
+    for name in ("translator", "bc", "sac", "dynamics"):
+        if name in pc:
+            r = pc[name]
+            lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` (/s) | {r['per_s']['pinned']:.0f} | "
+                         f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
+    lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']}, "
+              f"{pc['date']}, medians of {pc['repeats']}."]
+    return "\n".join(lines)
+
+
+def experiments(root: Path) -> str:
+    """Every development trial (docs/experiments/trials.csv), one row per trial and method."""
+    path = root / "docs" / "experiments" / "trials.csv"
+    rows = list(csv.DictReader(path.open()))
+    lines = ["| trial | change | method | demos | success | 95 % interval | worst seed | vs BC w/o translation |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        diff = f"{r['diff_vs_bc_no_translation_pct']} ({r['diff_ci_low_pct']} to {r['diff_ci_high_pct']})" \
+            if r["diff_vs_bc_no_translation_pct"] else "–"
+        lines.append(f"| {r['trial']} | {r['changes'] or '(none)'} | {r['method']} | {r['demos']} | "
+                     f"{r['success_pct']} % | {r['ci_low_pct']}–{r['ci_high_pct']} | {r['worst_seed_pct']} % | "
+                     f"{diff} |")
+    cpus = sorted({f"{r['cpu_model']} ({r['numerics']})" for r in rows})
+    dates = sorted({r["date"] for r in rows})
+    lines += ["", f"Development seeds {rows[0]['seeds'] if rows else ''}, development start states (200 per seed); "
+              f"{', '.join(cpus)}; {dates[0] if dates else ''} to {dates[-1] if dates else ''}."]
+    return "\n".join(lines)
+
+
+BLOCKS: dict[str, Callable[[Path], str]] = {"table1": table1, "headline": headline, "cross_cpu": cross_cpu,
+                                            "run_time": run_time, "benchmarks": benchmarks,
+                                            "experiments": experiments}
+"""Block name -> its renderer."""
+
+_BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)
+
+
+def render_page(text: str, root: Path = ROOT) -> str:
+    """The page with every generated block rendered anew."""
+    def sub(m: re.Match) -> str:
+        name = m.group(2)
+        if name not in BLOCKS:
+            raise KeyError(f"unknown generated block {name!r}; known: {sorted(BLOCKS)}")
+        return f"{m.group(1)}{BLOCKS[name](root)}\n{m.group(4)}"
+
+    return _BLOCK.sub(sub, text)
+
+
+def stale(root: Path = ROOT) -> list[str]:
+    """``page: block`` for every generated block that differs from its reports."""
+    out = []
+    for page in PAGES:
+        path = root / page
+        if not path.exists():
+            continue
+        text = path.read_text()
+        new = render_page(text, root)
+        if new != text:
+            old_blocks = {m.group(2): m.group(3) for m in _BLOCK.finditer(text)}
+            new_blocks = {m.group(2): m.group(3) for m in _BLOCK.finditer(new)}
+            out += [f"{page}: {k}" for k in new_blocks if new_blocks[k] != old_blocks.get(k)]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--check", action="store_true", help="exit 1 if a page disagrees with its reports; write nothing")
+    args = ap.parse_args()
+    if args.check:
+        bad = stale()
+        if bad:
+            print("stale generated blocks (run `make docs`): " + ", ".join(bad), file=sys.stderr)
+            sys.exit(1)
+        return
+    for page in PAGES:
+        path = ROOT / page
+        if path.exists():
+            text = path.read_text()
+            new = render_page(text)
+            if new != text:
+                path.write_text(new)
+                print(f"updated {page}")
+
+
+if __name__ == "__main__":
+    main()
