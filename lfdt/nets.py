@@ -55,13 +55,12 @@ def _reduce_to(grad: torch.Tensor, shape: torch.Size) -> torch.Tensor:
 
 
 class _BlasMatmul(torch.autograd.Function):
+    # forward(ctx, ...) rather than setup_context: torch binds the arguments of the latter with inspect on every call,
+    # which costs more than a small product itself
     @staticmethod
-    def forward(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    def forward(ctx, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(a, b)
         return torch.from_numpy(np.matmul(_blas(a), _blas(b)))
-
-    @staticmethod
-    def setup_context(ctx, inputs, output) -> None:
-        ctx.save_for_backward(*inputs)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
@@ -180,13 +179,11 @@ def sin_cos(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 class _NumpySinCos(torch.autograd.Function):
     @staticmethod
-    def forward(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(ctx, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         a = x.detach().numpy()
-        return torch.from_numpy(np.sin(a)), torch.from_numpy(np.cos(a))
-
-    @staticmethod
-    def setup_context(ctx, inputs, output) -> None:
-        ctx.save_for_backward(*output)
+        sin, cos = torch.from_numpy(np.sin(a)), torch.from_numpy(np.cos(a))
+        ctx.save_for_backward(sin, cos)
+        return sin, cos
 
     @staticmethod
     def backward(ctx, g_sin: torch.Tensor, g_cos: torch.Tensor) -> torch.Tensor:
@@ -205,13 +202,10 @@ def softplus(x: torch.Tensor) -> torch.Tensor:
 
 class _NumpySoftplus(torch.autograd.Function):
     @staticmethod
-    def forward(x: torch.Tensor) -> torch.Tensor:
+    def forward(ctx, x: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(x)
         a = x.detach().numpy()
         return torch.from_numpy(np.maximum(a, np.float32(0)) + np.log1p(np.exp(-np.abs(a))))
-
-    @staticmethod
-    def setup_context(ctx, inputs, output) -> None:
-        ctx.save_for_backward(inputs[0])
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor) -> torch.Tensor:

@@ -61,6 +61,9 @@ def main() -> None:
     ap.add_argument("-S", "--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--hypothesis", default="", help="what the trial tests, written before it runs")
     ap.add_argument("--keep", action="store_true", help="keep dev/<name>/ (models and data) afterwards")
+    ap.add_argument("--reuse-translations", metavar="TRIAL",
+                    help="take the translated demonstrations of an earlier trial kept with --keep (its translator "
+                         "params must be this trial's) instead of training translators: for BC-only changes")
     ap.add_argument("--baseline-from", help="pair with BC without translation of this earlier trial (same seeds, "
                                             "same start states; it does not depend on the translator's params)")
     args = ap.parse_args()
@@ -87,6 +90,12 @@ def main() -> None:
     wanted = [methods.get(m) for m in args.methods]
     translators = sorted({m.translator for m in wanted if m.translator}, key=list(methods.METHODS).index)
     rows, diag_rows = {}, []
+    if args.reuse_translations:
+        src = ROOT / "dev" / args.reuse_translations / "bc_train"
+        if not src.exists():
+            raise SystemExit(f"--reuse-translations: {src} does not exist (run that trial with --keep)")
+        shutil.copytree(src, dirs["bc_data_dir"])
+        translators = []
     for n in args.demos:
         for tm in translators:
             cfgs = common.configs(tm, n, args.seeds, str(params_path), **dirs)
