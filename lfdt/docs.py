@@ -86,6 +86,37 @@ def run_time(root: Path) -> str:
     return "\n".join(lines)
 
 
+def run_time_line(root: Path) -> str:
+    """One sentence: how long the committed run took, where (reports/run_time.json)."""
+    doc = _read_json(root / "reports" / "run_time.json")
+    setup = "" if doc.get("setup_minutes") is None else f", after {doc['setup_minutes']:.1f} min of `make setup`"
+    return (f"The committed results took **{doc['minutes']:.0f} min** of `dvc repro` ({doc['how']}{setup}) on "
+            f"{doc['cpu_model']} with {doc['cores']} cores, {doc['date']}.")
+
+
+def twin(root: Path) -> str:
+    """The twin's results as its report stage wrote them (reports/twin.md), headings one level down."""
+    text = (root / "reports" / "twin.md").read_text().strip()
+    return re.sub(r"(?m)^#", "##", text)
+
+
+def translator_diagnostics(root: Path) -> str:
+    """The translator diagnostics per (method, demos), from reports/translator_diagnostics.csv."""
+    from lfdt.report import DIAGNOSTICS
+
+    rows = list(csv.DictReader((root / "reports" / "translator_diagnostics.csv").open()))
+    rows = [r for r in rows if r.get("selected_iteration")]
+    head = "| diagnostic | " + " | ".join(f"{r['method']} d{r['demos']}" for r in rows) + " |"
+    lines = [head, "| --- |" + " --- |" * len(rows)]
+    for key, meaning in DIAGNOSTICS.items():
+        vals = []
+        for r in rows:
+            v = r.get(key, "")
+            vals.append("–" if v in ("", "nan") else f"{float(v):.4g}")
+        lines.append(f"| {meaning} | " + " | ".join(vals) + " |")
+    return "\n".join(lines)
+
+
 def benchmarks(root: Path) -> str:
     """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json)."""
     res = root / "benchmarks" / "results"
@@ -125,9 +156,10 @@ def experiments(root: Path) -> str:
     return "\n".join(lines)
 
 
-BLOCKS: dict[str, Callable[[Path], str]] = {"table1": table1, "headline": headline, "cross_cpu": cross_cpu,
-                                            "run_time": run_time, "benchmarks": benchmarks,
-                                            "experiments": experiments}
+BLOCKS: dict[str, Callable[[Path], str]] = {
+    "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
+    "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
+    "translator_diagnostics": translator_diagnostics}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)

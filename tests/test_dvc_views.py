@@ -1,4 +1,4 @@
-"""The README's `dvc exp show` filters, run on the committed results: each shows its slice of Table I's headline
+"""The `dvc exp show` filters of docs/pipeline.md, run on the committed results: each shows its slice of Table I's headline
 metrics and fits in 200 columns."""
 
 import json
@@ -14,12 +14,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _readme_filters() -> list[str]:
-    """The filters of the README's "DVC views" section."""
-    text = (ROOT / "README.md").read_text()
-    section = text[text.index("### DVC views"):]
+    """The filters of the "DVC views" section of docs/pipeline.md."""
+    text = (ROOT / "docs" / "pipeline.md").read_text()
+    section = text[text.index("## DVC views"):]
     section = section[:section.index("\n#", 1)]
     filters = re.findall(r"^dvc exp show --drop '\.\*' --keep '([^']+)'", section, re.M)
-    assert len(filters) >= 2, "the README gives no `dvc exp show` filter"
+    assert len(filters) >= 2, "docs/pipeline.md gives no `dvc exp show` filter"
     return filters
 
 

@@ -1,4 +1,4 @@
-"""The README's real-robot guide, step by step, as a user without robots would dry-run it: a fake arm on a
+"""The real-robot guide (docs/real-robot.md), step by step, as a user without robots would dry-run it: a fake arm on a
 pseudo-terminal, a video of a chessboard as the camera, the MuJoCo twin as the rig (``--sim``), then the DVC
 commands of steps 5 and 6, ending with the real backend's twin report."""
 
@@ -17,7 +17,7 @@ from test_tracker import K, _board_views, _chessboard_texture
 
 from lfdt.robot import fake_mycobot as fm
 
-README = smoke.ROOT / "README.md"
+GUIDE = smoke.ROOT / "docs" / "real-robot.md"
 
 
 def _cli(project: Path, *args: str) -> str:
@@ -35,8 +35,8 @@ def _digest(folder: Path) -> dict[str, str]:
 
 
 def _guide() -> str:
-    text = README.read_text()
-    return text[text.index("## Real robot"):text.index("### The MuJoCo twin")]
+    text = GUIDE.read_text()
+    return text[text.index("# Real robot"):text.index("## The MuJoCo twin")]
 
 
 def test_the_guide_step_by_step(tmp_path):
