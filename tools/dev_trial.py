@@ -64,6 +64,9 @@ def main() -> None:
     ap.add_argument("--reuse-translations", metavar="TRIAL",
                     help="take the translated demonstrations of an earlier trial kept with --keep (its translator "
                          "params must be this trial's) instead of training translators: for BC-only changes")
+    ap.add_argument("--bc-seed-offset", type=int, default=0,
+                    help="with --reuse-translations: train BC with seed + OFFSET on the same data (translations and "
+                         "raw subsets of the seed): what BC's own seed does")
     ap.add_argument("--baseline-from", help="pair with BC without translation of this earlier trial (same seeds, "
                                             "same start states; it does not depend on the translator's params)")
     args = ap.parse_args()
@@ -90,12 +93,18 @@ def main() -> None:
     wanted = [methods.get(m) for m in args.methods]
     translators = sorted({m.translator for m in wanted if m.translator}, key=list(methods.METHODS).index)
     rows, diag_rows = {}, []
+    if args.bc_seed_offset and not args.reuse_translations:
+        raise SystemExit("--bc-seed-offset needs --reuse-translations")
     if args.reuse_translations:
         src = ROOT / "dev" / args.reuse_translations / "bc_train"
         if not src.exists():
             raise SystemExit(f"--reuse-translations: {src} does not exist (run that trial with --keep)")
         shutil.copytree(src, dirs["bc_data_dir"])
         translators = []
+        if args.bc_seed_offset:
+            for group in dirs["bc_data_dir"].iterdir():
+                for s in args.seeds:
+                    shutil.copytree(group / f"s{s}", group / f"s{s + args.bc_seed_offset}")
     for n in args.demos:
         for tm in translators:
             cfgs = common.configs(tm, n, args.seeds, str(params_path), **dirs)
@@ -104,8 +113,11 @@ def main() -> None:
             for r in res:
                 diag_rows.append({"method": tm, "demos": n, "stage": "translator", **_flat(r["metrics"])})
         for m in wanted:
-            cfgs = common.configs(m.name, n, args.seeds, str(params_path), **dirs)
-            if m.data == "raw":
+            bc_seeds = [s + args.bc_seed_offset for s in args.seeds]
+            cfgs = common.configs(m.name, n, bc_seeds, str(params_path), **dirs)
+            if m.data == "raw" and args.bc_seed_offset:
+                pass  # the seed's own raw subsets, copied above
+            elif m.data == "raw":
                 for cfg in cfgs:
                     for pairing in layout.PAIRINGS:
                         path = dirs["demos_dir"] / f"{pairing}.parquet"
@@ -124,7 +136,7 @@ def main() -> None:
                                                    p.grid.workers, desc=f"evaluate {m.name}-d{n}", unit="trial"))
             outcomes = np.array([[t["success"] for t in r["trials"]] for r in res], dtype=float)
             rows[(m.name, n)] = outcomes
-            save_outcomes(args.name, m.name, n, args.seeds, outcomes)
+            save_outcomes(args.name, m.name, n, bc_seeds, outcomes)
             for r, o in zip(res, outcomes):
                 diag_rows.append({"method": m.name, "demos": n, "stage": "evaluate", "seed": r["metrics"]["seed"],
                                   "success_rate": float(o.mean())})
@@ -193,7 +205,8 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
                 a, b = evaluation.paired_difference_interval(o, base)
                 dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
             w.writerow({"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
-                        "changes": " ".join(args.set), "method": m, "demos": n,
+                        "changes": " ".join(args.set + ([f"BC seed = seed + {args.bc_seed_offset}"]
+                                                        if args.bc_seed_offset else [])), "method": m, "demos": n,
                         "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
                         "success_pct": f"{100 * o.mean():.1f}", "ci_low_pct": f"{100 * lo:.1f}",
                         "ci_high_pct": f"{100 * hi:.1f}", "worst_seed_pct": f"{100 * per.min():.1f}",
