@@ -20,6 +20,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from lfdt import numerics
 from lfdt.errors import StageError
 from lfdt.files import process_alive
 
@@ -264,6 +265,8 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
     client = mlflow.MlflowClient()
     mark_killed_runs(client, exp, run_name or stage)
     all_tags.update({"lfdt.host": socket.gethostname(), "lfdt.pid": os.getpid()})
+    # what the run's numbers depend on besides code and params: pinned or native numerics, and the CPU
+    all_tags.update({f"lfdt.{k}": v for k, v in numerics.describe().items() if not k.startswith("env.")})
     run = _retry(lambda: client.create_run(exp, run_name=run_name or stage))
     tracker = Tracker(run.info.run_id)
     status = "FAILED"

@@ -27,6 +27,11 @@ def test_stage_run_logs_params_metrics_tags(tmp_path, monkeypatch):
     assert tags["dvc.exp_name"] == "exp-smoke"
     assert {"version.mujoco", "version.torch", "version.stable-baselines3", "version.gymnasium"} <= set(tags)
     assert "mlflow.source.git.commit" in tags
+    # what the numbers depend on besides code and params
+    from lfdt import numerics
+
+    assert tags["lfdt.numerics"] == numerics.mode() and tags["lfdt.cpu_model"] == numerics.cpu_model()
+    assert tags["lfdt.cpu_isa"] in ("avx512", "avx2", "other")
     assert len(client.get_metric_history(run_id, "loss")) == 2500
 
 
