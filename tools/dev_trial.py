@@ -143,6 +143,7 @@ def main() -> None:
             print(f"{m.name}-d{n}: {100 * outcomes.mean():.1f} % (per seed "
                   f"{', '.join(f'{100 * x:.0f}' for x in outcomes.mean(axis=1))})", file=sys.stderr)
     write_results(args, rows, diag_rows, time.perf_counter() - t0)
+    print(json.dumps({f"{m}-d{n}": round(100 * o.mean(), 1) for (m, n), o in rows.items()}), file=sys.stderr)
     if not args.keep:
         shutil.rmtree(root, ignore_errors=True)
 
@@ -214,11 +215,12 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
                         "diff_vs_bc_no_translation_pct": diff, "diff_ci_low_pct": dlo, "diff_ci_high_pct": dhi,
                         "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"})
     keys = sorted({k for r in diag_rows for k in r})
+    if not keys:
+        return
     with (out_dir / f"{args.name}_seeds.csv").open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(diag_rows)
-    print(json.dumps({f"{m}-d{n}": round(100 * o.mean(), 1) for (m, n), o in rows.items()}), file=sys.stderr)
 
 
 if __name__ == "__main__":
