@@ -99,6 +99,34 @@ def tasks_for(method: str, translated: pd.DataFrame | None = None,
     return [BCTask("pi", tl.state_columns("Y"), tl.action_columns("Y"), translated)]
 
 
+def recovery_augment(frame: pd.DataFrame, dyn, tl: TaskLayout, copies: int, noise: float, seed: int,
+                     action_bounds: tuple[float, float] | None = (-1.0, 1.0)) -> pd.DataFrame:
+    """``frame`` (transitions of domain Y) and ``copies`` more copies of it whose states are perturbed by Gaussian
+    noise of ``noise`` (Y's normalised units) and whose actions are F^-1(perturbed state, the demonstration's next
+    state): the action that takes the perturbed state back onto the demonstration (``bc.recovery_copies``). Copies
+    keep their episode index, so a validation split by episode keeps a transition and its copies together."""
+    if copies == 0:
+        return frame
+    s_cols = [layout.STATE_PREFIX + c for c in tl.state_columns("Y")]
+    s2_cols = [layout.NEXT_STATE_PREFIX + c for c in tl.state_columns("Y")]
+    a_cols = [layout.ACTION_PREFIX + c for c in tl.action_columns("Y")]
+    gen = torch.Generator().manual_seed(seed)
+    parts = [frame]
+    with torch.no_grad():
+        y_n = dyn.y_norm(torch.from_numpy(frame[s_cols].to_numpy(np.float32, copy=True)))
+        y2_n = dyn.y_norm(torch.from_numpy(frame[s2_cols].to_numpy(np.float32, copy=True)))
+        for _ in range(copies):
+            yp_n = y_n + noise * torch.randn(y_n.shape, generator=gen)
+            a = dyn.inverse_model(yp_n, y2_n)
+            if action_bounds is not None:
+                a = torch.clamp(a, *action_bounds)
+            copy = frame.copy()
+            copy[s_cols] = dyn.y_norm.inverse(yp_n).numpy()
+            copy[a_cols] = a.numpy()
+            parts.append(copy)
+    return pd.concat(parts, ignore_index=True)
+
+
 def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
     eps = np.unique(episodes)
     n_val = max(1, int(round(val_fraction * len(eps)))) if len(eps) > 1 else 0

@@ -461,6 +461,12 @@ class BCConfig(Strict):
     """Iterations between validation losses (a checkpoint is kept when the loss improves)."""
     input_noise: NonNegFloat = 0.0
     """Standard deviation of Gaussian noise added to the normalised training inputs (0 = none)."""
+    recovery_copies: Annotated[int, Field(ge=0, le=16)] = 0
+    """Copies of each translated (or re-executed) transition with its state perturbed and its action relabelled by
+    F^-1 towards the demonstration's next state, so that BC also learns how to get back onto a demonstration (0 = the
+    paper's plain BC; BC without translation has no F^-1 of its domain and ignores it)."""
+    recovery_noise: PosFloat = 0.1
+    """Standard deviation of the perturbation of recovery copies, in Y's normalised state units."""
     torch_threads: PosInt = 1
     """Torch CPU threads."""
 

@@ -12,11 +12,12 @@ from lfdt.nets import torch_device
 def run() -> None:
     args, p = stage.matrix_arguments(__doc__, methods.METHODS, {
         "bc-data": "the BC training sets, a folder per configuration",
+        "dynamics-dir": "F and F^-1 (bc.recovery_copies relabels with F^-1)",
         "policies": "where the policies go, a folder per configuration",
         "reports": "where the report <method>-d<demos>.json and its learning curve go"})
     torch_device(p.device)  # before any job starts
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data,
-                          policies_dir=args.policies)
+                          policies_dir=args.policies, dynamics_dir=args.dynamics_dir)
     group = cfgs[0].group
     members = 2 if methods.get(args.method).data == "raw" else 1
     with stage.frame(args.reports / f"{group}.json") as f:

@@ -45,3 +45,33 @@ def test_members_of_other_columns_do_not_stack():
     other = bc.BCTask("pi_r1", ["c0"], ["a0"], frame(1))
     with pytest.raises(ValueError, match="same columns"):
         bc.train_members([task(0), other], BCConfig(iterations=2), [0, 1])
+
+
+def test_recovery_copies_are_perturbed_states_labelled_back_onto_the_demonstration():
+    from lfdt import layout
+    from lfdt.dynamics import DynamicsModels
+    from lfdt.tasks.box_push import layout as box_layout
+
+    tl = box_layout.BOX_PUSH
+    s_cols, a_cols = tl.state_columns("Y"), tl.action_columns("Y")
+    rng = np.random.default_rng(0)
+    n = 40
+    df = pd.DataFrame(rng.normal(size=(n, len(s_cols))).astype(np.float32),
+                      columns=[layout.STATE_PREFIX + c for c in s_cols])
+    df[[layout.NEXT_STATE_PREFIX + c for c in s_cols]] = df[[layout.STATE_PREFIX + c for c in s_cols]].to_numpy() + 0.1
+    df[[layout.ACTION_PREFIX + c for c in a_cols]] = 0.5
+    df["episode_index"] = np.arange(n) // 10
+    torch.manual_seed(0)
+    dyn = DynamicsModels(len(s_cols), len(a_cols), [16])
+    assert bc.recovery_augment(df, dyn, tl, 0, 0.1, 3) is df
+    out = bc.recovery_augment(df, dyn, tl, 2, 0.1, 3)
+    assert len(out) == 3 * n and (out.episode_index.to_numpy() == np.tile(df.episode_index, 3)).all()
+    copy = out.iloc[n:2 * n]
+    s = copy[[layout.STATE_PREFIX + c for c in s_cols]].to_numpy(np.float32)
+    assert not np.allclose(s, df[[layout.STATE_PREFIX + c for c in s_cols]].to_numpy())  # perturbed
+    with torch.no_grad():
+        y_n = dyn.y_norm(torch.from_numpy(s))
+        y2_n = dyn.y_norm(torch.from_numpy(copy[[layout.NEXT_STATE_PREFIX + c for c in s_cols]].to_numpy(np.float32)))
+        want = torch.clamp(dyn.inverse_model(y_n, y2_n), -1, 1).numpy()
+    np.testing.assert_allclose(copy[[layout.ACTION_PREFIX + c for c in a_cols]].to_numpy(), want, atol=1e-5)
+    assert out.equals(bc.recovery_augment(df, dyn, tl, 2, 0.1, 3))  # the seed fixes the perturbations

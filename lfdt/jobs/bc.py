@@ -8,7 +8,7 @@ import time
 import torch
 
 from lfdt import bc, data, layout, methods, mlflow_runs, stage
-from lfdt.jobs.common import DATA_FILE, TASK, Config, numeric
+from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 
@@ -34,6 +34,14 @@ def bc_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
     torch.set_num_threads(bcfg.torch_threads)
     device = torch_device(p.device)
     tasks = [bc_tasks(cfg) for cfg in cfgs]
+    if bcfg.recovery_copies and methods.get(cfgs[0].method).data != "raw":
+        from lfdt.dynamics import load_models
+
+        dyn = load_models(cfgs[0].dynamics_dir / DYNAMICS_FILE)
+        for cfg, ts in zip(cfgs, tasks):
+            for t in ts:
+                t.frame = bc.recovery_augment(t.frame, dyn, TASK, bcfg.recovery_copies, bcfg.recovery_noise,
+                                              cfg.seed)
     names = [t.name for t in tasks[0]]
     seeds = [cfg.seed for cfg in cfgs]
     with contextlib.ExitStack() as runs_stack:

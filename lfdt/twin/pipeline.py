@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfdt import bc, data, layout, translation
+from lfdt import bc, data, layout, methods, translation
 from lfdt.config import TwinParams
 from lfdt.dynamics import fit_dynamics, load_random_y
 from lfdt.nets import save_state
@@ -228,6 +228,10 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     bcfg = p.bc_for(task)
     for method in METHODS:
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
+        if bcfg.recovery_copies and methods.get(method).data != "raw":
+            for t in members_data:
+                t.frame = bc.recovery_augment(t.frame, dyn, tl, bcfg.recovery_copies, bcfg.recovery_noise, seed,
+                                              action_bounds=None)
         members = []
         for t in members_data:
             m, st = bc.train_member(t, bcfg, seed, device=device)
