@@ -137,18 +137,36 @@ def benchmarks(root: Path) -> str:
     return "\n".join(lines)
 
 
-def experiments(root: Path) -> str:
-    """Every development trial (docs/experiments/trials.csv), one row per trial and method."""
+ABLATION_TRIALS = ("bcseed-0", "ablation-no-id", "ablation-no-id-translate-box", "ablation-no-dyn",
+                   "ablation-no-dyn-paper-d")
+"""The development trials that explain the ablation rows (docs/results.md, Ablations)."""
+
+
+def ablations(root: Path) -> str:
+    """The ablation trials' rows of docs/experiments/trials.csv, with the diagnostics that explain them."""
+    return experiments(root, only=ABLATION_TRIALS, diagnostics=("diag/robot_ee_error_m",
+                                                                 "diag/missing_robot_ee_to_hand_m"))
+
+
+def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tuple[str, ...] = ()) -> str:
+    """Every development trial (docs/experiments/trials.csv), one row per trial and method (``only``: those trials,
+    in that order, with the mean over seeds of each of ``diagnostics`` from the trial's seeds file)."""
     path = root / "docs" / "experiments" / "trials.csv"
     rows = list(csv.DictReader(path.open()))
-    lines = ["| trial | change | method | demos | success | 95 % interval | worst seed | vs BC w/o translation |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    if only is not None:
+        rows = sorted((r for r in rows if r["trial"] in only), key=lambda r: only.index(r["trial"]))
+        rows = [r for r in rows if r["method"] != "bc_no_translation" or r["trial"] == only[0]]
+    extra = "".join(f" {d} |" for d in diagnostics)
+    head = "| trial | change | method | demos | success | 95 % interval | worst seed | vs BC w/o translation |"
+    lines = [head + extra,
+             "| --- | --- | --- | --- | --- | --- | --- | --- |" + " --- |" * len(diagnostics)]
     for r in rows:
         diff = f"{r['diff_vs_bc_no_translation_pct']} ({r['diff_ci_low_pct']} to {r['diff_ci_high_pct']})" \
             if r["diff_vs_bc_no_translation_pct"] else "–"
+        diag = "".join(f" {_seed_mean(root, r['trial'], r['method'], d)} |" for d in diagnostics)
         lines.append(f"| {r['trial']} | {r['changes'] or '(none)'} | {r['method']} | {r['demos']} | "
                      f"{r['success_pct']} % | {r['ci_low_pct']}–{r['ci_high_pct']} | {r['worst_seed_pct']} % | "
-                     f"{diff} |")
+                     f"{diff} |" + diag)
     cpus = sorted({f"{r['cpu_model']} ({r['numerics']})" for r in rows})
     dates = sorted({r["date"] for r in rows})
     lines += ["", f"Development seeds {rows[0]['seeds'] if rows else ''}, development start states (200 per seed); "
@@ -156,10 +174,23 @@ def experiments(root: Path) -> str:
     return "\n".join(lines)
 
 
+def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
+    """The mean over seeds of a translator diagnostic of a trial (its seeds file), or '–'."""
+    path = root / "docs" / "experiments" / f"{trial}_seeds.csv"
+    if not path.exists():
+        return "–"
+    from lfdt.methods import get
+
+    translator = get(method).translator
+    vals = [float(r[key]) for r in csv.DictReader(path.open())
+            if r.get("stage") == "translator" and r.get("method") == translator and r.get(key) not in (None, "")]
+    return f"{sum(vals) / len(vals):.4g}" if vals else "–"
+
+
 BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
-    "translator_diagnostics": translator_diagnostics}
+    "translator_diagnostics": translator_diagnostics, "ablations": ablations}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)

@@ -28,6 +28,15 @@ class _NumpyAdam(torch.optim.Optimizer):
             raise ValueError(f"Adam: lr {lr}, betas {betas}, eps {eps} out of range")
         super().__init__(params, {"lr": lr, "betas": tuple(betas), "eps": eps})
 
+    def _scratch(self, p: torch.Tensor, like: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if not hasattr(self, "_tmp"):
+            self._tmp: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        bufs = self._tmp.get(id(p))
+        if bufs is None or bufs[0].shape != like.shape:
+            bufs = (np.empty_like(like), np.empty_like(like))
+            self._tmp[id(p)] = bufs
+        return bufs
+
     @torch.no_grad()
     def step(self, closure=None):
         loss = None if closure is None else closure()
@@ -49,19 +58,25 @@ class _NumpyAdam(torch.optim.Optimizer):
                 m = state["exp_avg"].numpy()
                 v = state["exp_avg_sq"].numpy()
                 x = p.detach().numpy()
+                # two scratch arrays per parameter, kept outside the state (not saved with it); every operation
+                # below writes into them, so a step allocates nothing
+                tmp, tmp2 = self._scratch(p, g)
                 f32 = np.float32
                 # m = b1 m + (1 - b1) g;  v = b2 v + (1 - b2) g^2
                 m *= f32(b1)
-                m += f32(1 - b1) * g
+                np.multiply(f32(1 - b1), g, out=tmp)
+                m += tmp
                 v *= f32(b2)
-                v += f32(1 - b2) * (g * g)
+                np.multiply(g, g, out=tmp)
+                np.multiply(f32(1 - b2), tmp, out=tmp)
+                v += tmp
                 # x -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)
-                denom = np.sqrt(v)
-                denom /= f32(math.sqrt(1 - b2 ** t))
-                denom += f32(group["eps"])
-                step = m / denom
-                step *= f32(group["lr"] / (1 - b1 ** t))
-                x -= step
+                np.sqrt(v, out=tmp)
+                tmp /= f32(math.sqrt(1 - b2 ** t))
+                tmp += f32(group["eps"])
+                np.divide(m, tmp, out=tmp2)
+                tmp2 *= f32(group["lr"] / (1 - b1 ** t))
+                x -= tmp2
         return loss
 
 
