@@ -174,6 +174,39 @@ def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tu
     return "\n".join(lines)
 
 
+BC_SEED_TRIALS = {0: "bcseed-0", 1000: "bcseed-1000", 2000: "bcseed-2000", 3000: "bcseed-3000", 4000: "bcseed-4000"}
+"""BC seed offset -> the development trial that trained BC with it on the baseline's data."""
+ENSEMBLES = {"lfdt": "ens5-lfdt", "bc_no_translation": "ens5-bc-no-translation"}
+"""Method -> the trial of its five BC seeds' mean action."""
+
+
+def _outcomes(root: Path, trial: str, method: str, demos: int = 100) -> dict[int, float]:
+    path = root / "docs" / "experiments" / "outcomes" / f"{trial}_{method}-d{demos}.csv"
+    rows = list(csv.DictReader(path.open()))
+    return {int(r["seed"]): sum(c == "1" for c in r["outcomes"]) / len(r["outcomes"]) for r in rows}
+
+
+def bc_seed_spread(root: Path) -> str:
+    """Per development seed: success with each of five BC seeds on the same data, and with their mean action."""
+    lines = []
+    for method, ens in ENSEMBLES.items():
+        per = {off: _outcomes(root, t, method) for off, t in BC_SEED_TRIALS.items()}
+        mean_of = _outcomes(root, ens, method)
+        seeds = sorted(per[0])
+        lines += [f"**{method}** (100 demonstrations; success in % per seed)", "",
+                  "| BC seed | " + " | ".join(str(s) for s in seeds) + " | mean |",
+                  "| --- |" + " --- |" * (len(seeds) + 1)]
+        for off, rates in per.items():
+            row = [rates[s + off] if s + off in rates else rates[s] for s in seeds]
+            lines.append(f"| seed + {off} | " + " | ".join(f"{100 * r:.0f}" for r in row) +
+                         f" | {100 * sum(row) / len(row):.1f} |")
+        row = [mean_of[s] for s in seeds]
+        lines.append("| mean action of the five | " + " | ".join(f"**{100 * r:.0f}**" for r in row) +
+                     f" | **{100 * sum(row) / len(row):.1f}** |")
+        lines.append("")
+    return "\n".join(lines).rstrip()
+
+
 def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
     """The mean over seeds of a translator diagnostic of a trial (its seeds file), or '–'."""
     path = root / "docs" / "experiments" / f"{trial}_seeds.csv"
@@ -190,7 +223,7 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
 BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
-    "translator_diagnostics": translator_diagnostics, "ablations": ablations}
+    "translator_diagnostics": translator_diagnostics, "ablations": ablations, "bc_seed_spread": bc_seed_spread}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)
