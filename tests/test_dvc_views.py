@@ -1,5 +1,5 @@
-"""The `dvc exp show` filters of docs/pipeline.md, run on the committed results: each shows its slice of Table I's headline
-metrics and fits in 200 columns."""
+"""The `dvc exp show` filters of docs/pipeline.md, run on the committed results: each shows its slice of Table I's
+headline metrics and fits in 200 columns."""
 
 import json
 import os

@@ -43,7 +43,7 @@ def test_plan_splits_the_dag_into_shared_independent_chains_and_final(repo):
         order = {s: i for i, s in enumerate(stages)}
         assert all(order[b] < order[a] for a, b in g.subgraph(stages).edges)  # upstream first
     assert {"train_experts", "fit_dynamics", "collect_demos", "collect_random"} <= set(plan.shared)
-    assert {"report", "twin_report"} == set(plan.final)
+    assert {"report", "twin_report", "fingerprint"} == set(plan.final)  # fingerprint: no upstream, nothing downstream
     # lfdt_track re-executes lfdt's translations: one chain; the twin of each task is one chain
     assert {"train_translator@lfdt-50", "track_demos@50", "bc_evaluate@lfdt_track-50"} <= \
         set(plan.chains["train_translator@lfdt-50"])
@@ -88,7 +88,8 @@ def test_set_expands_every_combination_into_valid_params_with_comments_kept():
     changed = [(a, b) for a, b in zip(base.splitlines(), pts[3].params_yaml.splitlines(), strict=True) if a != b]
     assert len(changed) == 2 and all("# " in b for _, b in changed)  # only those two lines, comments kept
     assert pts[3].set_args() == ["-S", "grid.seeds=[3, 4, 5, 6, 7, 8]", "-S", "translator.lambda_dyn=1"]
-    assert points.expand(base, ["grid.seeds=[3,4,5]"])[0].params_yaml == base  # the workspace's own values
+    own = ",".join(str(s) for s in yaml.safe_load(base)["grid"]["seeds"])
+    assert points.expand(base, [f"grid.seeds=[{own}]"])[0].params_yaml == base  # the workspace's own values
     # a key with one value is common to every point: names show only the keys that tell the points apart
     two = points.expand(base, ["grid.demos=[100]", "grid.seeds=[3,4,5],[3,4,5,6]"])
     assert [p.name.rsplit("-", 1)[0] for p in two] == ["seeds-3.4.5", "seeds-3.4.5.6"]
