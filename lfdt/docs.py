@@ -148,6 +148,33 @@ def ablations(root: Path) -> str:
                                                                  "diag/missing_robot_ee_to_hand_m"))
 
 
+ABLATION_VARIANTS = {"lfdt_no_id": ("ablation-no-id", "ablation-no-id-translate-box",
+                                   "the box copied from X", "G translating the box as the paper's does"),
+                     "lfdt_no_dyn": ("ablation-no-dyn", "ablation-no-dyn-paper-d",
+                                     "our D (robots' columns of translated random motion)",
+                                     "the paper's D (every column of every translated transition)")}
+"""Ablation method -> (its development trial with our translator, the paper-faithful variant's trial, what ours
+does, what the paper's does)."""
+
+
+def ablation_caption(root: Path) -> str:
+    """Table I's caption for the ablation rows: where ours deviates and the paper-faithful variant's number."""
+    from lfdt import methods
+
+    rows = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())}
+    parts = []
+    for method, (ours, paper, ours_is, paper_is) in ABLATION_VARIANTS.items():
+        a, b = rows[ours], rows[paper]
+        parts.append(f"**{methods.get(method).title}** is our translator with one loss weight at 0, {ours_is}; on "
+                     f"the development seeds at {a['demos']} demonstrations it succeeds {a['success_pct']} % "
+                     f"(worst seed {a['worst_seed_pct']} %), with {paper_is} {b['success_pct']} % (worst seed "
+                     f"{b['worst_seed_pct']} %)")
+    cpus = sorted({f"{r['cpu_model']}" for r in rows.values()})
+    why = "[docs/results.md](docs/results.md#ablations-why-ours-are-not-the-papers)"
+    return ("Deviations of the ablation rows: " + "; ".join(parts) + f" ({', '.join(cpus)}, "
+            f"{rows[ABLATION_VARIANTS['lfdt_no_id'][1]]['date']}; why: {why}).")
+
+
 def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tuple[str, ...] = ()) -> str:
     """Every development trial (docs/experiments/trials.csv), one row per trial and method (``only``: those trials,
     in that order, with the mean over seeds of each of ``diagnostics`` from the trial's seeds file)."""
@@ -223,7 +250,8 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
 BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
-    "translator_diagnostics": translator_diagnostics, "ablations": ablations, "bc_seed_spread": bc_seed_spread}
+    "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,
+    "bc_seed_spread": bc_seed_spread}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)
