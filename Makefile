@@ -24,7 +24,7 @@ reproduce: setup  ## run the whole pipeline with params.yaml
 # Two pytest workers, one per core of the project's machine; the tests sharing the smoke project's DAG run (one
 # xdist_group) on one worker, so it is built once.
 test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers)
-	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup; rc=$$?; \
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup --durations=15; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc
 
 smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a temporary copy (most of `make test`)

@@ -1,6 +1,8 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before any test loads numpy or torch)
 
+import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,12 +43,40 @@ class SmokeProject:
     """The reports of :data:`smoke.TABLES` right after it (later tests change the project's params)."""
 
 
+def _build_smoke_project(tmp_path_factory) -> SmokeProject:
+    """Build the smoke project once per test session, whichever worker asks first; the others wait for it and get
+    the same project. Under `pytest -n` the workers' temporary folders share a parent, where the build lives beside
+    a lock and a marker written last (the xdist documentation's pattern for a session-wide fixture)."""
+    import smoke
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    done = shared / "smoke-built.json"
+    with FileLock(str(shared / "smoke.lock"), timeout=smoke.REPRO_TIMEOUT_S + 600):
+        if not done.exists():
+            dst = smoke.make_project(shared / "smoke")
+            out = smoke.dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
+            tables = shared / "smoke-tables"
+            for i, t in enumerate(smoke.TABLES):
+                (tables / str(i)).parent.mkdir(exist_ok=True)
+                (tables / str(i)).write_bytes((dst / t).read_bytes())
+            (shared / "smoke-output.txt").write_text(out)
+            done.write_text(json.dumps({"root": str(dst)}))
+    root = Path(json.loads(done.read_text())["root"])
+    tables = {t: (shared / "smoke-tables" / str(i)).read_bytes() for i, t in enumerate(smoke.TABLES)}
+    return SmokeProject(root, (shared / "smoke-output.txt").read_text(), tables)
+
+
 @pytest.fixture(scope="session")
 def smoke_project(tmp_path_factory) -> SmokeProject:
-    """A copy of the project with the smoke params, after one full `dvc repro` (shared by the smoke and sweep
-    tests: the sweep must give the same tables)."""
-    import smoke
+    """A copy of the project with the smoke params, after one full `dvc repro`, for the tests that look at or change
+    it (they run on one worker: their ``xdist_group``)."""
+    return _build_smoke_project(tmp_path_factory)
 
-    dst = smoke.make_project(tmp_path_factory.mktemp("smoke"))
-    out = smoke.dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
-    return SmokeProject(dst, out, {t: (dst / t).read_bytes() for t in smoke.TABLES})
+
+@pytest.fixture(scope="session")
+def smoke_tables(tmp_path_factory) -> Callable[[], dict[str, bytes]]:
+    """The smoke project's tables right after its `dvc repro`, fetched when called: the sweep tests run their own DAG
+    on the other worker meanwhile and ask only at the end (built here if no other worker builds it)."""
+    return lambda: _build_smoke_project(tmp_path_factory).tables

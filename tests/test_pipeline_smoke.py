@@ -20,8 +20,8 @@ import yaml
 from lfdt import data, layout, methods, stage
 from lfdt.tasks.box_push import layout as box_layout
 
-# with `pytest -n` (make test) these tests and the other module sharing the smoke_project fixture run on one worker,
-# so the smoke project's DAG is built once
+# with `pytest -n` (make test) these tests run on one worker, one after the other (later ones change the project);
+# the sweep's group runs on the other worker meanwhile
 pytestmark = pytest.mark.xdist_group("smoke_project")
 
 _dvc = smoke.dvc

@@ -26,9 +26,9 @@ from lfdt.sweep import points
 from lfdt.sweep.chain import RAN, safe_name
 from lfdt.sweep.plan import make_plan
 
-# with `pytest -n` (make test) these tests and the other module sharing the smoke_project fixture run on one worker,
-# so the smoke project's DAG is built once
-pytestmark = pytest.mark.xdist_group("smoke_project")
+# with `pytest -n` (make test) both tests run on one worker (the second continues the first's sweep), beside the
+# smoke project's group on the other; the plain repro's tables are asked for only when compared (smoke_tables)
+pytestmark = pytest.mark.xdist_group("sweep")
 
 BUCKET = "lfdt-sweep"
 
@@ -133,7 +133,7 @@ def coordinator(tmp_path_factory) -> Path:
     return smoke.make_project(tmp_path_factory.mktemp("sweep") / "coordinator", commit=True)
 
 
-def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smoke_project, cluster, coordinator):
+def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smoke_tables, cluster, coordinator):
     coord = coordinator
     plan = make_plan(coord)
     assert len(plan.chains) >= 4 and plan.shared and "report" in plan.final
@@ -162,7 +162,7 @@ def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smok
     assert {"report", "twin_report"} <= ran_here
 
     assert "up to date" in smoke.dvc(["status"], coord)
-    for table, plain in smoke_project.tables.items():
+    for table, plain in smoke_tables().items():
         assert (coord / table).read_bytes() == plain, f"{table} differs from the plain `dvc repro`"
 
     # the tracking server holds every run behind the reports, each adopted by the report's parent run
@@ -180,7 +180,7 @@ def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smok
     assert {r.info.run_id for r in evaluate} <= {r.info.run_id for r in children}
 
 
-def test_a_point_of_set_is_recorded_as_an_experiment_from_the_run_cache(smoke_project, cluster, coordinator):
+def test_a_point_of_set_is_recorded_as_an_experiment_from_the_run_cache(smoke_tables, cluster, coordinator):
     """``--set``: each point is swept in a clone and recorded as a DVC experiment of the workspace. A point with the
     params of the sweep above reruns no chain (when run alone, its chains run first); recording it restores every
     shared and chain stage and builds only the reports, whose tables are the plain `dvc repro`'s; the workspace is
@@ -203,7 +203,7 @@ def test_a_point_of_set_is_recorded_as_an_experiment_from_the_run_cache(smoke_pr
     refs = subprocess.run(["git", "for-each-ref", "--format=%(refname)", "refs/exps"], cwd=coord,
                           capture_output=True, text=True, check=True).stdout.split()
     (ref,) = [r for r in refs if r.endswith(f"/{point.name}")]
-    for table, plain in smoke_project.tables.items():
+    for table, plain in smoke_tables().items():
         shown = subprocess.run(["git", "show", f"{ref}:{table}"], cwd=coord, capture_output=True, check=True)
         assert shown.stdout == plain, f"{table} of experiment {point.name} differs from the plain `dvc repro`"
     assert subprocess.run(["git", "status", "--porcelain"], cwd=coord, capture_output=True,
