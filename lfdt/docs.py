@@ -49,7 +49,16 @@ def headline(root: Path) -> str:
                      f"points ({pct['diff_ci95_low']:+.1f} to {pct['diff_ci95_high']:+.1f})")
     seeds = rows[0]["seeds"] if rows else "?"
     trials = rows[0]["trials_per_seed"] if rows else "?"
-    return (f"Over {seeds} training seeds x {trials} evaluation start states per cell: " + "; ".join(parts) + ".")
+    verdict = {"better": [], "worse": [], "not different": []}
+    for d in sorted({int(r["demos"]) for r in rows}):
+        a = by.get(("lfdt", d))
+        if a is not None and by.get(("bc_no_translation", d)) is not None:
+            lo, hi = float(a["diff_ci95_low"]), float(a["diff_ci95_high"])
+            verdict["better" if lo > 0 else "worse" if hi < 0 else "not different"].append(str(d))
+    said = "; ".join(f"{k} at {', '.join(v)} demos" for k, v in verdict.items() if v)
+    return (f"Over {seeds} training seeds x {trials} evaluation start states per cell: " + "; ".join(parts) + ". "
+            f"LfDT against BC without translation (the paper's finding is 'better' at every demo count), judged by "
+            f"whether the paired interval excludes 0: {said}.")
 
 
 def cross_cpu(root: Path) -> str:
