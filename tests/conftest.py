@@ -80,3 +80,12 @@ def smoke_tables(tmp_path_factory) -> Callable[[], dict[str, bytes]]:
     """The smoke project's tables right after its `dvc repro`, fetched when called: the sweep tests run their own DAG
     on the other worker meanwhile and ask only at the end (built here if no other worker builds it)."""
     return lambda: _build_smoke_project(tmp_path_factory).tables
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """Name the CPU the tests ran on, with the numeric mode: where tests/test_fingerprint.py passed, that CPU computes
+    the committed fingerprint's bits (a CI log then says which CPUs reproduce it)."""
+    from lfdt import numerics
+
+    d = numerics.describe()
+    terminalreporter.write_line(f"CPU: {d['cpu_model']} ({d['cpu_isa']}), numerics {d['numerics']}")
