@@ -16,6 +16,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from lfdt import methods
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ("README.md", "docs/results.md", "docs/experiments.md", "docs/benchmarks.md")
 """The pages that hold generated blocks."""
@@ -37,10 +39,13 @@ def headline(root: Path) -> str:
     rows = list(csv.DictReader((root / "reports" / "table1.csv").open()))
     by = {(r["method"], int(r["demos"])): r for r in rows}
     parts = []
+    verdict: dict[str, list[str]] = {"better": [], "worse": [], "not different": []}
     for d in sorted({int(r["demos"]) for r in rows}):
         a, b = by.get(("lfdt", d)), by.get(("bc_no_translation", d))
         if a is None or b is None:
             continue
+        lo, hi = float(a["diff_ci95_low"]), float(a["diff_ci95_high"])
+        verdict["better" if lo > 0 else "worse" if hi < 0 else "not different"].append(str(d))
         pct = {k: 100 * float(a[k]) for k in ("success_rate", "worst_seed", "ci95_low", "ci95_high",
                                                "diff_vs_bc_no_translation", "diff_ci95_low", "diff_ci95_high")}
         parts.append(f"{d} demos: LfDT **{pct['success_rate']:.1f} %** (worst seed {pct['worst_seed']:.0f} %, "
@@ -49,12 +54,6 @@ def headline(root: Path) -> str:
                      f"points ({pct['diff_ci95_low']:+.1f} to {pct['diff_ci95_high']:+.1f})")
     seeds = rows[0]["seeds"] if rows else "?"
     trials = rows[0]["trials_per_seed"] if rows else "?"
-    verdict = {"better": [], "worse": [], "not different": []}
-    for d in sorted({int(r["demos"]) for r in rows}):
-        a = by.get(("lfdt", d))
-        if a is not None and by.get(("bc_no_translation", d)) is not None:
-            lo, hi = float(a["diff_ci95_low"]), float(a["diff_ci95_high"])
-            verdict["better" if lo > 0 else "worse" if hi < 0 else "not different"].append(str(d))
     said = "; ".join(f"{k} at {', '.join(v)} demos" for k, v in verdict.items() if v)
     return (f"Over {seeds} training seeds x {trials} evaluation start states per cell: " + "; ".join(parts) + ". "
             f"LfDT against BC without translation (the paper's finding is 'better' at every demo count), judged by "
@@ -168,8 +167,6 @@ does, what the paper's does)."""
 
 def ablation_caption(root: Path) -> str:
     """Table I's caption for the ablation rows: where ours deviates and the paper-faithful variant's number."""
-    from lfdt import methods
-
     rows = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())}
     parts = []
     for method, (ours, paper, ours_is, paper_is) in ABLATION_VARIANTS.items():
@@ -178,10 +175,13 @@ def ablation_caption(root: Path) -> str:
                      f"the development seeds at {a['demos']} demonstrations it succeeds {a['success_pct']} % "
                      f"(worst seed {a['worst_seed_pct']} %), with {paper_is} {b['success_pct']} % (worst seed "
                      f"{b['worst_seed_pct']} %)")
-    cpus = sorted({f"{r['cpu_model']}" for r in rows.values()})
+    used = [rows[trial] for ours, paper, _, _ in ABLATION_VARIANTS.values() for trial in (ours, paper)]
+    cpus = sorted({r["cpu_model"] for r in used})
+    dates = sorted({r["date"] for r in used})
+    when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
     why = "[docs/results.md](docs/results.md#ablations-why-ours-are-not-the-papers)"
     return ("Deviations of the ablation rows: " + "; ".join(parts) + f" ({', '.join(cpus)}, "
-            f"{rows[ABLATION_VARIANTS['lfdt_no_id'][1]]['date']}; why: {why}).")
+            f"{when}; why: {why}).")
 
 
 def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tuple[str, ...] = ()) -> str:
@@ -248,9 +248,7 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
     path = root / "docs" / "experiments" / f"{trial}_seeds.csv"
     if not path.exists():
         return "–"
-    from lfdt.methods import get
-
-    translator = get(method).translator
+    translator = methods.get(method).translator
     vals = [float(r[key]) for r in csv.DictReader(path.open())
             if r.get("stage") == "translator" and r.get("method") == translator and r.get(key) not in (None, "")]
     return f"{sum(vals) / len(vals):.4g}" if vals else "–"
