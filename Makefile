@@ -21,8 +21,8 @@ setup: $(STAMP)  ## create .venv and install the pinned dependencies
 reproduce: setup  ## run the whole pipeline with params.yaml
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/dvc repro
 
-# Two pytest workers, one per core of the project's machine; the tests sharing the smoke project's DAG run (one
-# xdist_group) on one worker, so it is built once.
+# Two pytest workers, one per core of the project's machine; the smoke project's tests (one xdist_group) run on one,
+# the sweep's (another) on the other, and the smoke DAG is built once (tests/conftest.py).
 test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers)
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup --durations=15; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc

@@ -1,6 +1,5 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before any test loads numpy or torch)
 
-import json
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -52,20 +51,21 @@ def _build_smoke_project(tmp_path_factory) -> SmokeProject:
 
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    done = shared / "smoke-built.json"
+    root, tables = shared / "smoke", shared / "smoke-tables"
+    done = shared / "smoke-built"
     with FileLock(str(shared / "smoke.lock"), timeout=smoke.REPRO_TIMEOUT_S + 600):
         if not done.exists():
-            dst = smoke.make_project(shared / "smoke")
-            out = smoke.dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
-            tables = shared / "smoke-tables"
+            if root.exists():
+                pytest.fail(f"the smoke project's `dvc repro` failed in {root} (see the test that built it)")
+            smoke.make_project(root)
+            out = smoke.dvc(["repro"], root, timeout=smoke.REPRO_TIMEOUT_S)
+            tables.mkdir()
             for i, t in enumerate(smoke.TABLES):
-                (tables / str(i)).parent.mkdir(exist_ok=True)
-                (tables / str(i)).write_bytes((dst / t).read_bytes())
+                (tables / str(i)).write_bytes((root / t).read_bytes())
             (shared / "smoke-output.txt").write_text(out)
-            done.write_text(json.dumps({"root": str(dst)}))
-    root = Path(json.loads(done.read_text())["root"])
-    tables = {t: (shared / "smoke-tables" / str(i)).read_bytes() for i, t in enumerate(smoke.TABLES)}
-    return SmokeProject(root, (shared / "smoke-output.txt").read_text(), tables)
+            done.touch()
+    saved = {t: (tables / str(i)).read_bytes() for i, t in enumerate(smoke.TABLES)}
+    return SmokeProject(root, (shared / "smoke-output.txt").read_text(), saved)
 
 
 @pytest.fixture(scope="session")
