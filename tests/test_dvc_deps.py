@@ -80,6 +80,11 @@ REGISTRY = ROOT / "lfdt" / "tasks" / "registry.py"
 """The task registry imports a task's module by name (importlib), out of the reach of :func:`imports_of`."""
 
 
+RUN_BY_PATH = {ROOT / "lfdt" / "policy_models.py": ROOT / "lfdt" / "policy_pyfunc.py"}
+"""Files a module hands to another program by path rather than importing them: MLflow runs a policy model's code
+file (``lfdt.policy_models.MODEL_CODE``) when it logs and loads the model."""
+
+
 def task_module(name: str) -> Path:
     """The file of the module that holds task ``name``'s object, as the registry names it."""
     from lfdt.tasks import registry
@@ -105,6 +110,9 @@ def required(cmd: str, item: dict) -> set[Path]:
     if REGISTRY in files:
         for task in served_tasks(item):
             files |= closure(task_module(task))
+    for module, code in RUN_BY_PATH.items():
+        if module in files:
+            files |= closure(code)
     return files
 
 
@@ -178,6 +186,16 @@ def test_closure_follows_imports_transitively():
     assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/tasks/box_push/env.py", "lfdt/config.py"} <= files
 
 
+def test_a_policy_models_code_file_is_a_dep_of_the_stage_that_logs_it():
+    """MLflow runs lfdt/policy_pyfunc.py by path: an edit of it must rerun the stage that logs the models."""
+    from lfdt.policy_models import MODEL_CODE
+
+    assert RUN_BY_PATH[ROOT / "lfdt" / "policy_models.py"] == MODEL_CODE
+    name, cmd, deps, item = next(s for s in STAGES if s[0] == "register_policies")
+    assert "lfdt/policy_pyfunc.py" in deps
+    assert missing_deps(cmd, [d for d in deps if d != "lfdt/policy_pyfunc.py"], item) == ["lfdt/policy_pyfunc.py"]
+
+
 def test_a_stage_that_looks_its_task_up_depends_on_that_task_alone():
     """The registry imports by name: a twin stage instance needs its own task's module (and what it imports), and
     another task's module is no dep of it."""
@@ -188,10 +206,14 @@ def test_a_stage_that_looks_its_task_up_depends_on_that_task_alone():
     assert extra_deps(cmd, [*deps, "lfdt/tasks/peg_insertion.py"], item) == ["lfdt/tasks/peg_insertion.py"]
 
 
+EVERY_TASK_STAGES = ("register_policies",)
+"""Stages that serve Table I's task and the twin's alike (they look every task up in the registry)."""
+
+
 def test_table1_stages_depend_on_no_other_task():
     """The box push's stages import its modules directly, never the registry: no other task's code is theirs."""
     for name, cmd, _, item in STAGES:
-        if name.startswith("twin_"):
+        if name.startswith("twin_") or name in EVERY_TASK_STAGES:
             continue
         files = {f.relative_to(ROOT).as_posix() for f in required(cmd, item)}
         assert REGISTRY.relative_to(ROOT).as_posix() not in files, name

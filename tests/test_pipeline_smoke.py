@@ -41,7 +41,7 @@ SEEDS = (0, 1)
 def test_every_stage_ran(project):
     _, out = project
     stages = ["train_experts", "collect_random", "collect_demos", "fit_dynamics", "select_demos@3", "track_demos@3",
-              "report", "twin_report"]
+              "report", "twin_report", "register_policies"]
     stages += [f"{s}@{t}" for s in ("twin_collect", "twin_train", "twin_evaluate")
                for t in ("block_push", "peg_insertion")]
     stages += [f"train_translator@{m}-3" for m in TRANSLATORS]
@@ -280,6 +280,57 @@ def test_twin_pipeline_outputs(project):
                (dst / f"data/twin/{task}/s1/random_Y/episode_000000.parquet").read_bytes()
 
 
+def test_every_policy_is_a_registered_mlflow_model(project, tmp_path):
+    """reports/models.csv names a registered model per trained policy; loaded by its URI it acts like the policy in
+    models/ (the same bits), `mlflow models predict` answers its saved observation, and the twin's deploy takes it."""
+    import mlflow
+    import numpy as np
+
+    from lfdt import bc, policy_models
+    from lfdt.tasks import registry
+
+    dst, _ = project
+    rows = list(csv.DictReader((dst / "reports/models.csv").open()))
+    table1 = {(r["method"], r["seed"]) for r in rows if r["task"] == "box_push"}
+    twin = {(r["task"], r["method"], r["seed"]) for r in rows if r["task"] != "box_push"}
+    assert table1 == {(m, str(s)) for m in METHODS for s in SEEDS}
+    assert twin == {(t, m, str(s)) for t in ("block_push", "peg_insertion") for m in ("bc_no_translation", "lfdt")
+                    for s in SEEDS}
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{dst / 'mlflow.db'}"}
+    os.environ["MLFLOW_TRACKING_URI"] = env["MLFLOW_TRACKING_URI"]
+    try:
+        for task, method, folder in (("box_push", "bc_no_translation", "models/bc/bc_no_translation-d3/s1"),
+                                     ("block_push", "lfdt", "models/twin/block_push/s1/lfdt")):
+            uri = f"models:/{policy_models.registered_name(task, method, 3 if task == 'box_push' else None)}@seed1"
+            assert uri in {r["uri"] for r in rows}
+            bounds = (-1.0, 1.0) if task == "box_push" else None
+            saved, _ = bc.BCPolicy.load(dst / folder, registry.get(task).layout, bounds)
+            loaded = policy_models.load_policy(uri, task, method)
+            obs = policy_models.input_example(task).to_numpy()[0]
+            assert np.array_equal(loaded(obs), saved(obs)), f"{uri} acts otherwise than {folder}"
+            with pytest.raises(ValueError, match="not the"):
+                policy_models.load_policy(uri, task, "lfdt_no_id")
+            model = mlflow.models.get_model_info(uri)
+            assert model.signature.inputs.input_names() == registry.get(task).layout.state_columns("Y")
+            example = Path(mlflow.artifacts.download_artifacts(f"{uri}/serving_input_example.json",
+                                                               dst_path=str(tmp_path / task)))
+            out = subprocess.run([str(Path(sys.executable).parent / "mlflow"), "models", "predict", "-m", uri,
+                                  "-i", str(example), "-t", "json", "--env-manager", "local"], env=env, cwd=dst,
+                                 capture_output=True, text=True, timeout=300)
+            assert out.returncode == 0, out.stderr[-2000:]
+            pred = json.loads(out.stdout[out.stdout.index('{"predictions"'):])["predictions"][0]
+            assert list(pred) == registry.get(task).layout.action_columns("Y")
+            np.testing.assert_allclose(list(pred.values()), saved(obs), atol=1e-5)
+    finally:
+        os.environ.pop("MLFLOW_TRACKING_URI")
+    log = tmp_path / "deploy.csv"
+    out = subprocess.run([sys.executable, "-m", "lfdt.robot", "deploy", "--sim", "--task", "block_push", "--method",
+                          "lfdt", "--models", "models:/block_push.lfdt@seed1", "--trials", "2", "--log", str(log)],
+                         env=env, cwd=dst, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert len(log.read_text().splitlines()) == 3
+
+
 def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(project):
     dst, _ = project
     out = _dvc(["repro"], dst)
@@ -289,7 +340,8 @@ def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(proje
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     out = _dvc(["repro"], dst, timeout=smoke.REPRO_TIMEOUT_S)
     ran = {line.split("'")[1] for line in out.splitlines() if line.startswith("Running stage")}
-    assert ran == {"track_demos@3", "bc_evaluate@lfdt_track-3", "report"}
+    # the retrained policies become new versions of their registered models
+    assert ran == {"track_demos@3", "bc_evaluate@lfdt_track-3", "report", "register_policies"}
 
 
 def _runs_in(db: Path) -> list[dict]:

@@ -494,8 +494,9 @@ def add_deploy_parser(subparsers) -> None:
                                           "real_dir/TASK/deploy_METHOD.csv with twin.backend: real.")
     add_rig_arguments(p, task_required=True)
     p.add_argument("--method", required=True, choices=METHODS)
-    p.add_argument("--models", required=True, type=Path, metavar="DIR",
-                   help="trained models of one seed, e.g. models/twin/TASK/s0")
+    p.add_argument("--models", required=True, metavar="DIR|URI",
+                   help="trained models of one seed, e.g. models/twin/TASK/s0, or a registered policy, e.g. "
+                        "models:/TASK.METHOD@seed3 (reports/models.csv lists them)")
     p.add_argument("--trials", type=positive_int, required=True, metavar="N", help="trials to run")
     p.add_argument("--log", required=True, type=Path, metavar="CSV",
                    help="outcome log, e.g. data/real/TASK/deploy_METHOD.csv")
@@ -506,6 +507,7 @@ def add_deploy_parser(subparsers) -> None:
 
 def run_deploy(args: argparse.Namespace) -> int:
     """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C."""
+    from lfdt import policy_models
     from lfdt.evaluation import evaluation_seeds
     from lfdt.robot import deploy_log
     from lfdt.robot.rig import running
@@ -517,12 +519,21 @@ def run_deploy(args: argparse.Namespace) -> int:
     except deploy_log.DeployLogError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_FAILED
-    if not (args.models / args.method).is_dir():
-        print(f"error: --models {args.models}: no trained {args.method} policy in {args.models / args.method} (the "
-              f"twin_train stage writes models/twin/TASK/s<seed>/; with twin.backend: real after recording)",
+    if policy_models.is_uri(args.models):
+        from mlflow.exceptions import MlflowException
+
+        try:
+            policy = policy_models.load_policy(args.models, task, args.method)
+        except (MlflowException, ValueError) as e:
+            print(f"error: --models {args.models}: {e}", file=sys.stderr)
+            return EXIT_FAILED
+    elif not (Path(args.models) / args.method).is_dir():
+        print(f"error: --models {args.models}: no trained {args.method} policy in {Path(args.models) / args.method} "
+              f"(the twin_train stage writes models/twin/TASK/s<seed>/; with twin.backend: real after recording)",
               file=sys.stderr)
         return EXIT_FAILED
-    policy = load_policy(task, args.method, args.models)
+    else:
+        policy = load_policy(task, args.method, args.models)
     rig = _make_rig(args, task, config, "Y", "scripted", 0, max_steps=args.steps)
     seeds = evaluation_seeds(done + args.trials)  # the twin evaluation's start states, trial by trial
     successes = 0
