@@ -1,4 +1,5 @@
-"""DVC stage: reports/twin_runs.csv and reports/twin.md, our results beside the paper's real-robot numbers."""
+"""DVC stage: reports/twin_runs.csv and reports/twin.md, our results beside the paper's real-robot numbers, and the
+headline success rates as the metrics file reports/twin.json."""
 
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
@@ -25,7 +26,7 @@ def run() -> None:
                                 "out-dir": "where twin_runs.csv and twin.md go"})
     args = ap.parse_args()
     p = stage.params(args.params).twin
-    rows, lines = [], []
+    rows, lines, headline = [], [], {}
     source = "MuJoCo twin" if p.backend == "sim" else "the robots"
     if p.backend == "sim" and p.start_states == "development":
         source += ", development start states: for choosing settings, not results"
@@ -42,6 +43,8 @@ def run() -> None:
             per_seed = ", ".join(f"{100 * np.mean([r['success'] for r in trials if r['seed'] == s]):.0f}"
                                  for s in seeds)
             lo, hi = interval(trials)
+            headline.setdefault(task, {})[method] = {"success_rate": round(k / max(n, 1), 4),
+                                                     "ci_low": round(lo, 4), "ci_high": round(hi, 4)}
             pk, pn = twin.PAPER_REAL[task][method]
             lines.append(f"| {task} | {methods.get(method).title} | **{100 * k / max(n, 1):.0f} %** | {k}/{n} | "
                          f"{per_seed} | {100 * lo:.0f}–{100 * hi:.0f} % | {pk}/{pn} |")
@@ -57,11 +60,15 @@ def run() -> None:
     children = [i for task in p.tasks for kind in ("data", "train", "eval")
                 for i in stage.run_ids(stage.read_report(args.twin_reports / f"{task}_{kind}.json"))]
     params = {"twin": {"seeds": p.seeds, "trials": p.trials, "backend": p.backend}}
-    with stage.frame(None, "twin_report", params, tags={"pipeline_parent": "true"},
+    # the headline metrics (`dvc metrics show`), their run id and wall time in runs/twin.json
+    with stage.frame(args.out_dir / "twin.json", "twin_report", params, tags={"pipeline_parent": "true"},
                      run_name=mlflow_runs.pipeline_run_name("twin")) as f:
         parent = f.run
+        f.report = headline
         parent.artifact(md)
         parent.artifact(runs_csv)
+        f.metrics({f"{task}/{method}/success_rate": v["success_rate"] for task, m in headline.items()
+                   for method, v in m.items()})
         mlflow_runs.adopt_children(parent.run_id, children)
         parent.dict({"runs": list(dict.fromkeys(children))}, "children.json")  # kept when a newer parent adopts them
     mlflow_views.install()  # the twin's view shows this parent's runs (the report stage may have run before it)
