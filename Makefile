@@ -23,7 +23,8 @@ reproduce: setup  ## run the whole pipeline with params.yaml
 
 # Two pytest workers, one per core of the project's machine; the smoke project's tests (one xdist_group) run on one,
 # the sweep's (another) on the other, and the smoke DAG is built once (tests/conftest.py).
-test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers)
+test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers); installs PostgreSQL if it can
+	tools/test_prereqs.sh
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup --durations=15; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc
 

@@ -58,7 +58,7 @@ def _build_smoke_project(tmp_path_factory) -> SmokeProject:
             if root.exists():
                 pytest.fail(f"the smoke project's `dvc repro` failed in {root} (see the test that built it)")
             smoke.make_project(root)
-            out = smoke.dvc(["repro"], root, timeout=smoke.REPRO_TIMEOUT_S)
+            out = smoke.run_quick_start(root)  # the README's `make reproduce`: dvc repro on the smoke params
             tables.mkdir()
             for i, t in enumerate(smoke.TABLES):
                 (tables / str(i)).write_bytes((root / t).read_bytes())

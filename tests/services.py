@@ -87,12 +87,30 @@ def _popen(args: list[str], log: Path, env: dict[str, str] | None = None, **kw) 
                             start_new_session=True, env={**os.environ, **(env or {})}, **kw)
 
 
+REQUIRE_ENV = "LFDT_REQUIRE_SERVICES"
+"""Set to 1 (``.ci/run`` does) to fail, not skip, a test whose server programs are missing."""
+
+
+def require_postgres() -> None:
+    """Skip the calling test, naming what is missing, when PostgreSQL's server programs are not installed (``make
+    test`` installs them where it can: ``tools/test_prereqs.sh``); with ``LFDT_REQUIRE_SERVICES=1``, fail instead."""
+    try:
+        _pg_bin("initdb")
+        _pg_bin("postgres")
+    except RuntimeError as e:
+        if os.environ.get(REQUIRE_ENV) == "1":
+            raise
+        import pytest
+
+        pytest.skip(f"{e}; skipped (set {REQUIRE_ENV}=1 to fail instead)")
+
+
 def _pg_bin(name: str) -> str:
     found = shutil.which(name) or next(iter(sorted(glob.glob(f"/usr/lib/postgresql/*/bin/{name}"), reverse=True)),
                                        None)
     if not found:
-        raise RuntimeError(f"PostgreSQL's {name} is not installed (Debian: apt-get install postgresql; .ci/run "
-                           f"installs it)")
+        raise RuntimeError(f"PostgreSQL's {name} is not installed (Debian: apt-get install postgresql; `make test` "
+                           f"installs it when run as root with apt-get)")
     return found
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -13,7 +14,11 @@ import yaml
 from lfdt.config import validate_params
 
 ROOT = Path(__file__).resolve().parents[1]
-PROJECT_FILES = ("dvc.yaml", "lfdt", "stages", "data/real")  # data/real: the twin stages' robot-data dependency
+PROJECT_FILES = ("dvc.yaml", "lfdt", "stages", "data/real", "Makefile", "requirements.txt", "pyproject.toml")
+"""What the smoke project copies: data/real is the twin stages' robot-data dependency; the Makefile (and what its
+set-up rule reads) runs the README's quick start."""
+QUICK_START = "## Set-up and the two commands"
+"""The README section whose first shell block is the quick start the smoke project runs word for word."""
 TABLES = ("reports/table1.csv", "reports/table1_runs.csv", "reports/twin_runs.csv")
 """What a run of the smoke params reports: a sweep of the same params must give them byte for byte."""
 REPRO_TIMEOUT_S = 2400
@@ -30,6 +35,43 @@ def dvc(args: list[str], cwd: Path, timeout: float = 600) -> str:
                           timeout=timeout)
     assert proc.returncode == 0, f"dvc {' '.join(args)} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc.stdout + proc.stderr
+
+
+def quick_start() -> list[str]:
+    """The commands of the README's quick start (its section's first ```bash block), comments stripped."""
+    text = (ROOT / "README.md").read_text()
+    if QUICK_START not in text:
+        raise AssertionError(f"README.md has no section {QUICK_START!r}: update tests/smoke.py's QUICK_START")
+    block = re.search(r"```bash\n(.*?)```", text[text.index(QUICK_START):], re.S)
+    assert block, f"README.md's {QUICK_START!r} has no ```bash block"
+    return [c for line in block.group(1).splitlines() if (c := line.split("#", 1)[0].strip())]
+
+
+def run_quick_start(cwd: Path, timeout: float = REPRO_TIMEOUT_S) -> str:
+    """Run the README's quick start in the project ``cwd`` (the smoke params), with this interpreter's environment as
+    its .venv; returns what it printed. ``make test`` is left out: it is the suite running this. ``make`` is told
+    not to remake .venv's install stamp (``-o``): the set-up would otherwise reinstall this package from the copy."""
+    commands = quick_start()
+    assert "make reproduce" in commands, f"the README's quick start {commands} no longer runs `make reproduce`"
+    venv = cwd / ".venv"
+    if not venv.exists():
+        venv.symlink_to(Path(sys.executable).parents[1])
+        with (cwd / ".gitignore").open("a") as fh:
+            fh.write("/.venv\n")
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "DVC_NO_ANALYTICS": "1"}
+    env.pop("MLFLOW_TRACKING_URI", None)
+    out = []
+    for command in commands:
+        if command == "make test":
+            continue
+        if command.startswith("make "):
+            command = "make -o .venv/.installed " + command[len("make "):]
+        proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True,
+                              timeout=timeout)
+        assert proc.returncode == 0, f"README quick start `{command}` failed:\n{proc.stdout[-3000:]}\n" \
+                                     f"{proc.stderr[-3000:]}"
+        out.append(proc.stdout + proc.stderr)
+    return "\n".join(out)
 
 
 def merge(base: dict, over: dict) -> dict:
@@ -57,7 +99,7 @@ def make_project(dst: Path, commit: bool = False) -> Path:
         if src.is_dir():
             shutil.copytree(src, dst / name, ignore=shutil.ignore_patterns("__pycache__"))
         else:
-            shutil.copy(src, dst / name)
+            shutil.copy2(src, dst / name)
     (dst / "params.yaml").write_text(smoke_params_yaml())
     subprocess.run(["git", "init", "-q"], cwd=dst, check=True)
     dvc(["init", "-q"], dst)

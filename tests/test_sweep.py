@@ -42,6 +42,7 @@ class Cluster:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
+    services.require_postgres()
     logs = tmp_path_factory.mktemp("service-logs")
     with contextlib.ExitStack() as stack, ThreadPoolExecutor(1) as pool:
         # Ray starts beside the others (its nodes take the longest); stopped last, also when another fails
