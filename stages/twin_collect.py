@@ -6,7 +6,8 @@ import shutil
 
 from lfdt import parallel, stage
 from lfdt.tasks import registry
-from lfdt.twin import pipeline as twin_pipeline
+from lfdt.twin import collect as twin_collect
+from lfdt.twin.common import SeedJob
 
 
 def run() -> None:
@@ -17,8 +18,8 @@ def run() -> None:
                      tags={"task": task, "seeds": ",".join(map(str, p.seeds)), "backend": p.backend},
                      run_name=f"{task} twin_collect") as f:
         shutil.rmtree(args.data_dir / task, ignore_errors=True)
-        jobs = [twin_pipeline.SeedJob(task, seed, str(args.params), data_root=str(args.data_dir)) for seed in p.seeds]
-        per_seed = parallel.run_jobs(twin_pipeline.collect_job, jobs, all_params.grid.workers, total=len(jobs),
+        jobs = [SeedJob(task, seed, str(args.params), data_root=str(args.data_dir)) for seed in p.seeds]
+        per_seed = parallel.run_jobs(twin_collect.twin_collect_job, jobs, all_params.grid.workers, total=len(jobs),
                                      desc=f"twin_collect {task}", unit="seed")
         stats = {f"s{j.seed}": s for j, s in zip(jobs, per_seed, strict=True)}
         f.metrics({f"{s}/{k}/{kk}": vv for s, per in stats.items() for k, v in per.items() for kk, vv in v.items()})

@@ -5,9 +5,10 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 from pathlib import Path
 
 from lfdt import parallel, stage, twin
-from lfdt.robot import deploy_log
+from lfdt.rig import deploy_log
 from lfdt.tasks import registry
-from lfdt.twin import pipeline as twin_pipeline
+from lfdt.twin import evaluate as twin_evaluate
+from lfdt.twin.common import SeedJob
 
 
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
@@ -38,10 +39,10 @@ def run() -> None:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
-            jobs = [twin_pipeline.SeedJob(task, seed, str(args.params), models_dir=str(args.models / task / f"s{seed}"),
+            jobs = [SeedJob(task, seed, str(args.params), models_dir=str(args.models / task / f"s{seed}"),
                                           video_dir=str(video_root) if seed == p.seeds[0] else None)
                     for seed in p.seeds]
-            rows = [r for per in parallel.run_jobs(twin_pipeline.evaluate_job, jobs, all_params.grid.workers,
+            rows = [r for per in parallel.run_jobs(twin_evaluate.twin_evaluate_job, jobs, all_params.grid.workers,
                                                    total=len(jobs), desc=f"twin_evaluate {task}", unit="seed")
                     for r in per]
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}

@@ -3,7 +3,7 @@ that is not one fails with its file and line."""
 
 import pytest
 
-from lfdt.robot.deploy_log import DeployLogError, append_trial, read_trials
+from lfdt.rig.deploy_log import DeployLogError, append_trial, read_trials
 
 
 def test_appended_trials_read_back(tmp_path):

@@ -335,6 +335,22 @@ def test_every_policy_is_a_registered_mlflow_model(project, tmp_path):
     assert len(log.read_text().splitlines()) == 3
 
 
+def test_an_edit_of_the_gan_reruns_training_never_data_collection(project):
+    """lfdt/translation.py is the translator's code: the stages that train or apply translators go stale, the twin's
+    data collection and the demonstrations do not."""
+    dst, _ = project
+    gan = dst / "lfdt/translation.py"
+    original = gan.read_bytes()
+    try:
+        gan.write_bytes(original + b"\n# an edit\n")
+        stale = set(json.loads(_dvc(["status", "--json"], dst)))
+    finally:
+        gan.write_bytes(original)
+    assert {"twin_train@block_push", "train_translator@lfdt-3"} <= stale
+    assert not stale & {"twin_collect@block_push", "twin_collect@peg_insertion", "collect_demos", "collect_random",
+                        "train_experts", "fit_dynamics"}, sorted(stale)
+
+
 def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(project):
     dst, _ = project
     out = _dvc(["repro"], dst)

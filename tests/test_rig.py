@@ -1,4 +1,4 @@
-"""lfdt.robot.rig and the rig commands of ``python -m lfdt.robot``: recordings that survive a kill or Ctrl-C,
+"""lfdt.rig.base and the rig commands of ``python -m lfdt.robot``: recordings that survive a kill or Ctrl-C,
 demonstrations and deployment on the twin (--sim), and RealRig against fake hardware (pymycobot talking to
 FakeMyCobot on pseudo-terminals, and a synthetic AprilTag video as the camera).
 """
@@ -21,13 +21,15 @@ import pyarrow.parquet as pq
 import pytest
 
 from lfdt import data, twin
+from lfdt.poses import invert_pose
+from lfdt.rig.recording import EpisodeRecorder, RecordingMismatch, read_recording, record_random_episode
+from lfdt.rig.sim import SimRig
 from lfdt.robot import fake_mycobot as fm
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
 from lfdt.robot.calibration import calibration_from_intrinsics, save_calibration
 from lfdt.robot.cli import METHODS, TASKS, build_parser, main
 from lfdt.robot.real_rig import CLIP_MARGIN_MM, RealRig
-from lfdt.robot.recording import EpisodeRecorder, RecordingMismatch, read_recording, record_random_episode
 from lfdt.robot.rig_config import (
     RigConfigError,
     example_rig_config,
@@ -35,10 +37,12 @@ from lfdt.robot.rig_config import (
     parse_rig_config,
     write_rig_config,
 )
-from lfdt.robot.sim_rig import SimRig
-from lfdt.robot.tracker import ObjectPose, TrackedFrame, invert_pose, make_pose
+from lfdt.robot.tracker import ObjectPose, TrackedFrame, make_pose
 from lfdt.tasks import registry
-from lfdt.twin import pipeline as twin_pipeline
+from lfdt.twin import collect as twin_collect
+from lfdt.twin import common as twin_common
+from lfdt.twin import evaluate as twin_evaluate
+from lfdt.twin import train as twin_train
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 30
@@ -195,7 +199,7 @@ def test_record_demos_sim_keeps_successful_episodes(tmp_path: Path, capsys) -> N
     assert sorted(df.episode_index.unique()) == [0, 1]
     assert [c for c in df.columns if c.startswith("action.")] == ["action.r2.dx", "action.r2.dz"]
     # the same episodes as the twin's own scripted demonstrations (same seeds, same program, same person)
-    twin_pipeline.record_demos("peg_insertion", "HR2", 2, 0, tmp_path / "twin_demos")
+    twin_collect.record_demos("peg_insertion", "HR2", 2, 0, tmp_path / "twin_demos")
     np.testing.assert_array_equal(df.to_numpy(), data.read_transitions(tmp_path / "twin_demos").to_numpy())
 
 
@@ -207,8 +211,8 @@ def tiny_models(tmp_path_factory) -> Path:
                    dynamics=DynamicsConfig(hidden=[32, 32], iterations=30, eval_every=10),
                    translator=TranslatorConfig(hidden=[32, 32], iterations=20, log_every=10, kinematics="learned"),
                    bc=BCConfig(hidden=[32, 32], iterations=20, eval_every=10))
-    twin_pipeline.collect("block_push", p.model_copy(update={"seeds": [0]}), root=root / "data")
-    twin_pipeline.train("block_push", p, 0, root / "models" / "s0", root=root / "data")
+    twin_collect.collect("block_push", p.model_copy(update={"seeds": [0]}), root=root / "data")
+    twin_train.train("block_push", p, 0, root / "models" / "s0", root=root / "data")
     return root / "models" / "s0"
 
 
@@ -225,8 +229,8 @@ def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_pat
         assert rows[0] == ["trial", "success"] and [r[0] for r in rows[1:]] == ["0", "1", "2"]
         assert all(r[1] in ("True", "False") for r in rows[1:])
         # the twin evaluation of the same policy from the same start states gives the same outcomes
-        policy = twin_pipeline.load_policy("block_push", method, tiny_models)
-        expected = [str(r["success"]) for r in twin_pipeline.evaluate_policy("block_push", policy, 3)]
+        policy = twin_evaluate.load_policy("block_push", method, tiny_models)
+        expected = [str(r["success"]) for r in twin_evaluate.evaluate_policy("block_push", policy, 3)]
         assert [r[1] for r in rows[1:]] == expected
     assert "block_push lfdt: " in capsys.readouterr().out
     spec = importlib.util.spec_from_file_location("twin_evaluate_stage", ROOT / "stages" / "twin_evaluate.py")
@@ -420,7 +424,7 @@ def test_random_recording_on_the_example_rig_completes(camera_files, tmp_path) -
     home = kinematics.home_angles("block_push")
     cfg = _config(camera_files, {}, control_period_s=0.001, reset_settle_s=0.5)
     rig = RealRig(cfg, "Y", arms={"r1": SimArm(home), "r2": SimArm(home)}, tracker=_StillTracker())
-    rec = EpisodeRecorder(tmp_path / "random_Y", twin_pipeline.twin_schema("block_push", "Y", "random", {}), 0.1)
+    rec = EpisodeRecorder(tmp_path / "random_Y", twin_common.twin_schema("block_push", "Y", "random", {}), 0.1)
     try:
         for ep in range(4):
             rig.reset(seed=ep)
@@ -433,12 +437,12 @@ def test_random_recording_on_the_example_rig_completes(camera_files, tmp_path) -
 
 def test_a_recording_folder_holds_one_domain_and_task(tmp_path, capsys) -> None:
     out = tmp_path / "rec"
-    EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "Y", "random", {}), 0.1)
-    EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "Y", "random", {"seed": 1}), 0.1)  # same: resumes
+    EpisodeRecorder(out, twin_common.twin_schema("block_push", "Y", "random", {}), 0.1)
+    EpisodeRecorder(out, twin_common.twin_schema("block_push", "Y", "random", {"seed": 1}), 0.1)  # same: resumes
     with pytest.raises(RecordingMismatch, match=r"holds a recording of domain 'Y', not 'R1H'"):
-        EpisodeRecorder(out, twin_pipeline.twin_schema("block_push", "R1H", "random", {}), 0.1)
+        EpisodeRecorder(out, twin_common.twin_schema("block_push", "R1H", "random", {}), 0.1)
     with pytest.raises(RecordingMismatch, match=r"task 'block_push', not 'peg_insertion'"):
-        EpisodeRecorder(out, twin_pipeline.twin_schema("peg_insertion", "Y", "random", {}), 0.1)
+        EpisodeRecorder(out, twin_common.twin_schema("peg_insertion", "Y", "random", {}), 0.1)
     args = ["record-random", "--sim", "--task", "block_push", "--domain", "HR2", "--episodes", "1", "--steps", "2",
             "--out", str(out)]
     assert main(args) == 2

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from lfdt import data
-from lfdt.robot.sim_rig import SimRig
+from lfdt.rig.sim import SimRig
 from lfdt.tasks import registry
 from lfdt.tasks.base import PlanarTask, Task
-from lfdt.twin import pipeline as twin_pipeline
-from lfdt.twin.env import TwinEnv
+from lfdt.tasks.planar_env import TwinEnv
+from lfdt.twin import collect as twin_collect
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,10 +99,10 @@ def test_a_new_task_is_one_class_and_one_entry(monkeypatch, tmp_path) -> None:
     assert obs.shape == (7,) and not info["is_success"]
     assert env.layout.state_columns("Y")[-3:] == ["obj.x", "obj.y", "obj.yaw"]
     # its demonstrations and random motion come from the shared loops, in the shared data conventions
-    stats = twin_pipeline.record_demos("puck_slide", "R1H", 2, 0, tmp_path / "demos")
+    stats = twin_collect.record_demos("puck_slide", "R1H", 2, 0, tmp_path / "demos")
     assert stats["demonstrations"] == 2
     data.check_transitions(tmp_path / "demos", "demos", "R1H", env.layout)
-    assert twin_pipeline.record_random("puck_slide", "HR2", 25, 10, 0, tmp_path / "random") == 25
+    assert twin_collect.record_random("puck_slide", "HR2", 25, 10, 0, tmp_path / "random") == 25
     with SimRig("puck_slide", "Y") as rig:
         assert rig.state_columns() == env.layout.state_columns("Y")
 

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
+from lfdt.poses import invert_pose, quaternion_from_matrix, rotation_about_axis, rotation_angle_deg, yaw_of_normal
 from lfdt.robot.calibration import (
     CameraCalibration,
     calibrate_charuco,
@@ -32,13 +33,8 @@ from lfdt.robot.tracker import (
     Tracker,
     base_from_camera,
     detection_in_base,
-    invert_pose,
     make_pose,
-    quaternion_from_matrix,
-    rotation_about_axis,
-    rotation_angle_deg,
     tag_object_points,
-    yaw_of_normal,
 )
 
 PHOTOS = Path(__file__).parent / "data" / "apriltag-photos"

@@ -4,11 +4,12 @@ import numpy as np
 import pytest
 
 from lfdt import data, layout
-from lfdt.robot.recording import EpisodeRecorder, read_recording
+from lfdt.rig.recording import EpisodeRecorder, read_recording
 from lfdt.tasks import registry
-from lfdt.twin import pipeline as twin_pipeline
-from lfdt.twin.env import TwinConfig, TwinEnv
-from lfdt.twin.programs import TwinDemonstrator
+from lfdt.tasks.demonstrators import TwinDemonstrator
+from lfdt.tasks.planar_env import TwinConfig, TwinEnv
+from lfdt.twin import collect as twin_collect
+from lfdt.twin import common as twin_common
 
 
 def run(env, policy, seed):
@@ -94,21 +95,21 @@ def test_same_seed_same_trajectory():
 
 
 def test_recordings_follow_the_data_conventions(tmp_path):
-    n = twin_pipeline.record_random("block_push", "R1H", 95, 30, 0, tmp_path / "random_R1H")
+    n = twin_collect.record_random("block_push", "R1H", 95, 30, 0, tmp_path / "random_R1H")
     assert n == 95
     meta = data.check_transitions(tmp_path / "random_R1H", "random", "R1H", registry.get("block_push").layout)
     assert meta["task"] == "block_push"
     df = read_recording(tmp_path / "random_R1H")
     assert len(df) == 95 and df.episode_index.nunique() == 4
     assert list(df.columns[:3]) == ["episode_index", "frame_index", "timestamp"]
-    stats = twin_pipeline.record_demos("peg_insertion", "HR2", 3, 0, tmp_path / "demos_HR2")
+    stats = twin_collect.record_demos("peg_insertion", "HR2", 3, 0, tmp_path / "demos_HR2")
     assert stats["demonstrations"] == 3
     df = data.read_transitions(tmp_path / "demos_HR2")
     assert [c for c in df.columns if c.startswith("action.")] == ["action.r2.dx", "action.r2.dz"]
 
 
 def test_recorder_writes_only_finished_episodes(tmp_path):
-    schema = twin_pipeline.twin_schema("block_push", "Y", "random", {})
+    schema = twin_common.twin_schema("block_push", "Y", "random", {})
     rec = EpisodeRecorder(tmp_path, schema, 0.1)
     rec.start()
     for _ in range(3):
@@ -121,7 +122,7 @@ def test_recorder_writes_only_finished_episodes(tmp_path):
 
 
 def test_random_motion_of_block_push_starts_along_the_push():
-    from lfdt.robot.sim_rig import SimRig
+    from lfdt.rig.sim import SimRig
     from lfdt.tasks.block_push import RANDOM_MOTION_ADVANCE
 
     env = TwinEnv("block_push", "Y")

@@ -17,15 +17,13 @@ from __future__ import annotations
 
 import math
 import numbers
-import signal
 import socket
 import struct
-import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
+from lfdt.rig.interrupt import emergency_stop, stop_on_interrupt  # noqa: F401  (the arm's Ctrl-C handling)
 from lfdt.robot.kinematics import DH, JOINT_LIMITS_DEG, position
 
 
@@ -356,44 +354,3 @@ class SafeArm:
                                f"{self.limits.max_lost_frames} allowed): arm stopped")
 
 
-def _restore_sigint(previous: Any) -> None:
-    # None means a handler installed outside Python; the default is the closest we can put back
-    signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
-
-
-def emergency_stop(arm: Arm) -> None:
-    """Stop then close ``arm``, closing even when stop fails; a Ctrl-C in between is ignored."""
-    in_main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
-    try:
-        try:
-            arm.stop()
-        finally:
-            arm.close()
-    finally:
-        if in_main:
-            _restore_sigint(previous)
-
-
-@contextmanager
-def stop_on_interrupt(arm: Arm) -> Iterator[Arm]:
-    """Within the block, Ctrl-C (SIGINT) stops and closes ``arm``, then KeyboardInterrupt propagates.
-
-    The handler itself only raises: stopping from inside it could deadlock on the lock pymycobot holds while a
-    command is in flight, so the stop runs here once the stack has unwound. Outside the main thread (where Python
-    delivers no signals) no handler is installed. On a normal exit the arm is left open.
-    """
-    def on_sigint(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    in_main = threading.current_thread() is threading.main_thread()
-    # installed explicitly because the process may have inherited SIGINT as ignored (started with nohup or &)
-    previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
-    try:
-        yield arm
-    except KeyboardInterrupt:
-        emergency_stop(arm)
-        raise
-    finally:
-        if in_main:
-            _restore_sigint(previous)

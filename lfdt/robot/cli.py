@@ -7,7 +7,7 @@ bound with ``set_defaults(func=...)``. Exit codes: 0 done; 2 bad arguments (argp
 Try it without hardware: ``python -m lfdt.robot.fake_mycobot --pty`` prints a device path to pass as ``--port``.
 
 The data and deployment commands (``calibrate``, ``write-rig-config``, ``record-random``, ``record-demos``, ``deploy``)
-work on a whole rig (:mod:`lfdt.robot.rig`: both arms and the camera, described by a JSON file) or, with ``--sim``,
+work on a whole rig (:mod:`lfdt.rig.base`: both arms and the camera, described by a JSON file) or, with ``--sim``,
 on the MuJoCo twin. They stop the arms on Ctrl-C (exit 130) and on any error; recordings keep only finished
 episodes (each written atomically when it ends), so an interrupted or killed recording leaves complete files only.
 Exit code 2 also covers a refused target, lost tracking and an unusable rig config.
@@ -282,8 +282,8 @@ def _rig_task(args: argparse.Namespace):
 
 def _make_rig(args: argparse.Namespace, task: str, config, domain: str, human: str, seed: int,
               max_steps: int | None = None):
+    from lfdt.rig.sim import SimRig
     from lfdt.robot.real_rig import RealRig
-    from lfdt.robot.sim_rig import SimRig
 
     if args.sim:
         return SimRig(task, domain, seed=seed, human=human, step_delay=args.step_delay, max_steps=max_steps)
@@ -309,7 +309,7 @@ def _wait_for_operator(rig, prompt: str, skip: bool) -> None:
 
 
 def _episodes_in(directory: Path) -> int:
-    from lfdt.robot.recording import EPISODE_GLOB
+    from lfdt.rig.recording import EPISODE_GLOB
 
     return len(list(Path(directory).glob(EPISODE_GLOB)))
 
@@ -330,7 +330,7 @@ def _progress(total: int, unit: str, desc: str):
 def _record_loop(rig, rec, out: Path, episodes: int, unit: str, run_episode) -> int:
     """Run ``run_episode()`` (True: an episode was kept) until ``episodes`` are kept; Ctrl-C and errors leave the
     finished episodes and drop the one in progress."""
-    from lfdt.robot.rig import running
+    from lfdt.rig.base import running
 
     bar = _progress(episodes, unit, out.name)
     try:
@@ -382,9 +382,9 @@ def run_record_random(args: argparse.Namespace) -> int:
     """Record ``--episodes`` episodes of ``--steps`` random steps; returns 0, or 130 on Ctrl-C."""
     import numpy as np
 
-    from lfdt.robot.recording import EpisodeRecorder, record_random_episode
+    from lfdt.rig.recording import EpisodeRecorder, record_random_episode
     from lfdt.seeding import episode_seed
-    from lfdt.twin.pipeline import twin_schema
+    from lfdt.twin.common import twin_schema
 
     task, config = _rig_task(args)
     rig = _make_rig(args, task, config, args.domain, args.human, args.seed)
@@ -410,7 +410,7 @@ def add_record_demos_parser(subparsers) -> None:
     """Register ``record-demos``."""
     p = subparsers.add_parser("record-demos", help="record demonstrations with one robot and a person",
                               description="Demonstrations in domain X: the pairing's robot replays the programmed "
-                                          "motion (lfdt.twin.programs.ProgrammedMotion) while the person's hand "
+                                          "motion (lfdt.tasks.demonstrators.ProgrammedMotion) while the person's hand "
                                           "is tracked; "
                                           "after each episode the operator says whether it succeeded (--sim: "
                                           "the twin's success flag; --yes: keep every episode). Successful "
@@ -432,10 +432,10 @@ def add_record_demos_parser(subparsers) -> None:
 def run_record_demos(args: argparse.Namespace) -> int:
     """Record until ``--episodes`` successful demonstrations are kept; exit 2 after --max-attempts."""
     from lfdt import layout
-    from lfdt.robot.recording import EpisodeRecorder, record_demo_episode
+    from lfdt.rig.recording import EpisodeRecorder, record_demo_episode
     from lfdt.seeding import episode_seed
-    from lfdt.twin.pipeline import twin_schema
-    from lfdt.twin.programs import ProgrammedMotion
+    from lfdt.tasks.demonstrators import ProgrammedMotion
+    from lfdt.twin.common import twin_schema
 
     task, config = _rig_task(args)
     rig = _make_rig(args, task, config, args.pairing, "scripted", args.seed, max_steps=args.steps)
@@ -484,7 +484,7 @@ class _GiveUp(RuntimeError):
 def add_deploy_parser(subparsers) -> None:
     """Register ``deploy``."""
     p = subparsers.add_parser("deploy", help="run a trained policy on both robots and log the outcomes",
-                              description="Trials of a trained twin policy (lfdt.twin.pipeline.load_policy) in "
+                              description="Trials of a trained twin policy (lfdt.twin.evaluate.load_policy) in "
                                           "domain Y: "
                                           "up to --steps control steps per trial, then the operator says whether "
                                           "the task succeeded (--sim: the twin's success flag, from the twin "
@@ -509,9 +509,9 @@ def run_deploy(args: argparse.Namespace) -> int:
     """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C."""
     from lfdt import policy_models
     from lfdt.evaluation import evaluation_seeds
-    from lfdt.robot import deploy_log
-    from lfdt.robot.rig import running
-    from lfdt.twin.pipeline import load_policy
+    from lfdt.rig import deploy_log
+    from lfdt.rig.base import running
+    from lfdt.twin.evaluate import load_policy
 
     task, config = _rig_task(args)
     try:
@@ -582,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments)."""
-    from lfdt.robot.recording import RecordingMismatch
+    from lfdt.rig.recording import RecordingMismatch
     from lfdt.robot.rig_config import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
 
     args = build_parser().parse_args(argv)

@@ -1,5 +1,5 @@
 """The real robots behind the rig interface: two myCobot 280 arms through the safety layer and the AprilTag
-tracker (conventions: :mod:`lfdt.robot.rig`)."""
+tracker (conventions: :mod:`lfdt.rig.base`)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from lfdt.rig.base import Rig, _wrap, plane_angle
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafeArm, SafetyError, TrackingLost, check_command
-from lfdt.robot.rig import Rig, _wrap, plane_angle
 from lfdt.robot.rig_config import RigConfig, RigConfigError, safety_limits, workspace_bounds
 
 CLIP_MARGIN_MM = 1.0

@@ -17,8 +17,6 @@ from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyLimits
 from lfdt.tasks import registry
 
-HUMAN_DRIVERS = ("scripted", "random")
-
 
 class RigConfigError(ValueError):
     """A rig configuration file that cannot be used; the message names the file and the key."""

@@ -15,7 +15,6 @@ metres. Quaternions are ``(w, x, y, z)`` as in MuJoCo.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -25,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from lfdt.poses import invert_pose, quaternion_from_matrix, rotation_about_axis
 from lfdt.robot.calibration import CameraCalibration, load_calibration
 
 DEFAULT_TAG_SIZE_M = 0.065
@@ -75,80 +75,6 @@ def make_pose(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     pose[:3, :3] = rotation
     pose[:3, 3] = np.asarray(translation, dtype=np.float64).reshape(3)
     return pose
-
-
-def invert_pose(pose: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform."""
-    rot = pose[:3, :3]
-    inv = np.eye(4)
-    inv[:3, :3] = rot.T
-    inv[:3, 3] = -rot.T @ pose[:3, 3]
-    return inv
-
-
-def quaternion_from_matrix(rotation: np.ndarray) -> np.ndarray:
-    """Unit quaternion ``(w, x, y, z)`` with ``w >= 0`` of a 3x3 rotation matrix."""
-    m = np.asarray(rotation, dtype=np.float64)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = np.array([0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s])
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = np.array([(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s])
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = np.array([(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s])
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = np.array([(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s])
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
-
-
-def rotation_angle_deg(r_a: np.ndarray, r_b: np.ndarray) -> float:
-    """Angle in degrees of the rotation taking ``r_a`` to ``r_b`` (both 3x3)."""
-    cos = (np.trace(np.asarray(r_a).T @ np.asarray(r_b)) - 1.0) / 2.0
-    return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))
-
-
-def _unit(v: Sequence[float] | np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=np.float64).reshape(3)
-    return v / np.linalg.norm(v)
-
-
-def rotation_about_axis(rotation: np.ndarray, axis: Sequence[float] | np.ndarray) -> float:
-    """Twist angle (radians, in (-pi, pi]) of ``rotation`` about ``axis`` (swing-twist decomposition).
-
-    For a rotation purely about ``axis`` this is its angle (right-hand rule); for ``axis = z`` and a small
-    tilt it is the usual yaw.
-    """
-    q = quaternion_from_matrix(rotation)
-    a = _unit(axis)
-    proj = float(np.dot(q[1:], a))
-    return 2.0 * math.atan2(proj, q[0])
-
-
-def yaw_of_normal(
-    rotation: np.ndarray,
-    axis: Sequence[float] | np.ndarray = (0.0, -1.0, 0.0),
-    reference: Sequence[float] | np.ndarray = (0.0, 0.0, -1.0),
-    normal: Sequence[float] | np.ndarray = (0.0, 0.0, 1.0),
-) -> float:
-    """Angle (radians) of a tag's face normal about ``axis``, measured from ``reference``.
-
-    ``rotation`` is ``frame_from_tag``; the tag's ``normal`` (default its z axis, out of the printed face)
-    and ``reference`` are projected on the plane orthogonal to ``axis`` and the signed angle between them
-    (right-hand rule about ``axis``) is returned. The defaults suit a tag on a stand turning about its
-    vertical axis seen by a camera (camera frame: y points down, so "up" is -y; a tag facing the camera
-    has its normal along -z and yaw 0).
-    """
-    a = _unit(axis)
-    n = np.asarray(rotation, dtype=np.float64) @ _unit(normal)
-    ref = _unit(reference)
-    n_p = n - np.dot(n, a) * a
-    r_p = ref - np.dot(ref, a) * a
-    return math.atan2(float(np.dot(np.cross(r_p, n_p), a)), float(np.dot(r_p, n_p)))
 
 
 def apriltag_dictionary() -> cv2.aruco.Dictionary:

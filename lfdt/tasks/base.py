@@ -5,8 +5,8 @@ Dynamics, translation, BC and evaluation take a task's :attr:`Task.layout` and t
 never import a particular task.
 
 A real-robot task is a planar problem for two arms (slot 1: Robot1 or the person, slot 2: Robot2 or the person)
-and one object. The twin (:mod:`lfdt.twin.env`) builds its MuJoCo scene from the task's parts, resets and scores
-episodes through it, and the demonstrations (:mod:`lfdt.twin.programs`) ask it where the programmed robot goes and
+and one object. The twin (:mod:`lfdt.tasks.planar_env`) builds its MuJoCo scene from the task's parts, resets and scores
+episodes through it, and the demonstrations (:mod:`lfdt.tasks.demonstrators`) ask it where the programmed robot goes and
 how the scripted person adapts. Nothing outside a task's own module branches on its name.
 """
 
@@ -23,7 +23,7 @@ from lfdt.layout import TaskLayout
 if TYPE_CHECKING:  # the twin imports the tasks; the type is only needed for hints
     import gymnasium as gym
 
-    from lfdt.twin.env import TwinConfig, TwinEnv
+    from lfdt.tasks.planar_env import TwinConfig, TwinEnv
 
 _UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
@@ -89,8 +89,8 @@ class PlanarTask(Task, ABC):
 
     def make_env(self, domain: str, config: TwinConfig | None = None, render_mode: str | None = None,
                  size: int = 240) -> TwinEnv:
-        """The task in the MuJoCo twin (:class:`lfdt.twin.env.TwinEnv`); ``config``: the twin's settings."""
-        from lfdt.twin.env import TwinEnv
+        """The task in the MuJoCo twin (:class:`lfdt.tasks.planar_env.TwinEnv`); ``config``: the twin's settings."""
+        from lfdt.tasks.planar_env import TwinEnv
 
         return TwinEnv(self.name, domain, config, render_mode, size)
 

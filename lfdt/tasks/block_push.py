@@ -14,7 +14,7 @@ import numpy as np
 from lfdt.tasks.base import PlanarTask
 
 if TYPE_CHECKING:
-    from lfdt.twin.env import TwinEnv
+    from lfdt.tasks.planar_env import TwinEnv
 
 GOAL_LINE = 0.22
 """y of the line the block must be pushed onto, m."""

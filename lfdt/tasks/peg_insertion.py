@@ -13,7 +13,7 @@ import numpy as np
 from lfdt.tasks.base import PlanarTask
 
 if TYPE_CHECKING:
-    from lfdt.twin.env import TwinEnv
+    from lfdt.tasks.planar_env import TwinEnv
 
 MEETING_POINT = np.array([0.12, 0.15])
 """Where the programmed robot brings the receptacle (R1H), m."""

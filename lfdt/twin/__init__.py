@@ -1,8 +1,9 @@
 """The MuJoCo twin of the paper's two real tasks and the LfDT pipeline run on it (or on robot recordings).
 
-:mod:`lfdt.twin.env` is the simulated scene, :mod:`lfdt.twin.programs` the robots' programmed motions and the
-scripted person, :mod:`lfdt.twin.pipeline` the recordings, training and evaluation the DVC stages run. The tasks
-themselves are in :mod:`lfdt.tasks`.
+:mod:`lfdt.twin.collect`, :mod:`lfdt.twin.train` and :mod:`lfdt.twin.evaluate` are the jobs of the DVC stages
+``twin_collect``, ``twin_train`` and ``twin_evaluate`` (:mod:`lfdt.twin.common` what they share). The scene
+(:mod:`lfdt.tasks.planar_env`), the programmed robots and the scripted person (:mod:`lfdt.tasks.demonstrators`) belong
+to the tasks (:mod:`lfdt.tasks`); the hardware-free rig and the recorder to :mod:`lfdt.rig`.
 """
 
 METHODS: tuple[str, ...] = ("bc_no_translation", "lfdt")

@@ -10,7 +10,7 @@ import numpy as np
 
 from lfdt import layout
 from lfdt.tasks import registry
-from lfdt.twin.env import TwinEnv
+from lfdt.tasks.planar_env import TwinEnv
 
 PROGRAMMED_SPEED = 0.045
 """Speed of the robot's programmed demonstration motion, m/s."""

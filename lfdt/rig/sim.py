@@ -1,4 +1,4 @@
-"""The MuJoCo twin behind the rig interface, for dry runs and tests (conventions: :mod:`lfdt.robot.rig`)."""
+"""The MuJoCo twin behind the rig interface, for dry runs and tests (conventions: :mod:`lfdt.rig.base`)."""
 
 from __future__ import annotations
 
@@ -8,22 +8,21 @@ from typing import Any
 
 import numpy as np
 
-from lfdt.robot.rig import Rig
-from lfdt.robot.rig_config import HUMAN_DRIVERS
+from lfdt.rig.base import HUMAN_DRIVERS, Rig
 
 
 class SimRig(Rig):
-    """The same interface over :class:`~lfdt.twin.env.TwinEnv`, for dry runs and tests.
+    """The same interface over :class:`~lfdt.tasks.planar_env.TwinEnv`, for dry runs and tests.
 
     In an X domain the human slot is driven by the twin's scripted person (``human="scripted"``, the person of
-    :class:`~lfdt.twin.programs.TwinDemonstrator`) or moves to the relative target the caller offers with each
-    step (``"random"``: :func:`lfdt.robot.recording.record_random_episode` draws it). ``step_delay`` sleeps after
+    :class:`~lfdt.tasks.demonstrators.TwinDemonstrator`) or moves to the relative target the caller offers with each
+    step (``"random"``: :func:`lfdt.rig.recording.record_random_episode` draws it). ``step_delay`` sleeps after
     each step, to pace a dry run like the robots.
     """
 
     def __init__(self, task: str, domain: str, seed: int = 0, human: str = "scripted", step_delay: float = 0.0,
                  max_steps: int | None = None) -> None:
-        from lfdt.twin.env import TwinConfig, TwinEnv
+        from lfdt.tasks.planar_env import TwinConfig, TwinEnv
 
         self._init_slots(task, domain)
         if human not in HUMAN_DRIVERS:
@@ -40,7 +39,7 @@ class SimRig(Rig):
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset the twin (``seed``: its start state; None: drawn from the rig's seed)."""
-        from lfdt.twin.programs import TwinDemonstrator
+        from lfdt.tasks.demonstrators import TwinDemonstrator
 
         if seed is None:
             seed = int(self._seeds.integers(2**31))

@@ -19,6 +19,7 @@ in a form that behaviour cloning learns well). Domains Y, R1H and HR2 as in the 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import mujoco
@@ -27,7 +28,9 @@ from gymnasium import spaces
 
 from lfdt import layout
 from lfdt.tasks import registry
-from lfdt.tasks.base import PlanarTask
+
+if TYPE_CHECKING:  # the task interface makes this environment (PlanarTask.make_env): for the hints only
+    from lfdt.tasks.base import PlanarTask
 
 
 @dataclass(frozen=True)

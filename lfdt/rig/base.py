@@ -1,14 +1,14 @@
 """The rig interface: the whole real setup behind one interface, two myCobot 280 arms and a camera
 (:class:`~lfdt.robot.real_rig.RealRig`), or the MuJoCo twin standing in for it
-(:class:`~lfdt.robot.sim_rig.SimRig`), both speaking the twin's observation and action conventions. Their
+(:class:`~lfdt.rig.sim.SimRig`), both speaking the twin's observation and action conventions. Their
 configuration is :mod:`lfdt.robot.rig_config`.
 
 **World frame.** One table frame shared by both arms and the camera, in millimetres in the configuration and metres
 in observations, like the twin's: block push moves in the horizontal plane (x, y), peg insertion in the vertical
 plane (x, z). Each arm's base pose in that frame comes from :class:`~lfdt.robot.rig_config.RigConfig`; the camera's
 comes from the table tag, whose pose in the world frame is configured (so :class:`~lfdt.robot.tracker.Tracker`
-reports in the world frame directly). To replay :class:`~lfdt.twin.programs.ProgrammedMotion` unchanged, put the world
-frame where the twin's is (see :func:`~lfdt.robot.rig_config.example_rig_config`).
+reports in the world frame directly). To replay :class:`~lfdt.tasks.demonstrators.ProgrammedMotion` unchanged, put the
+world frame where the twin's is (see :func:`~lfdt.robot.rig_config.example_rig_config`).
 
 **State** (layout ``registry.get(task).layout.state_columns(domain)``, metres and radians): per slot the end position in
 the task plane (a robot's flange from forward kinematics of its joint angles, moved to the world frame; the hand's
@@ -35,13 +35,17 @@ from typing import Any
 import numpy as np
 
 from lfdt import layout
-from lfdt.robot.arm import stop_on_interrupt
+from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.tasks import registry
+
+HUMAN_DRIVERS = ("scripted", "random")
+"""How a rig's human slot moves: the twin's scripted person, or random motion the caller draws (the real rig: the
+person's own hand)."""
 
 
 def plane_angle(rotation: np.ndarray, task: str) -> float:
     """In-plane angle (rad) of a rotation: its twist about the axis the task's object angle turns about."""
-    from lfdt.robot.tracker import rotation_about_axis
+    from lfdt.poses import rotation_about_axis
 
     return rotation_about_axis(rotation, registry.get(task).normal)
 

@@ -125,7 +125,7 @@ def record_random_episode(rig, rec: EpisodeRecorder, rng: np.random.Generator, s
 def record_demo_episode(rig, rec: EpisodeRecorder, program, robot: str, steps: int) -> tuple[bool | None, int]:
     """One demonstration on a reset rig, recorded into ``rec`` (started by the caller, who keeps or drops it).
 
-    ``program`` (:class:`lfdt.twin.programs.ProgrammedMotion`) gives the robot's absolute targets; the robot's
+    ``program`` (:class:`lfdt.tasks.demonstrators.ProgrammedMotion`) gives the robot's absolute targets; the robot's
     action is its commanded target relative to its end, the hand is only observed. Stops at ``steps`` or when the
     rig says the episode is over, then stops the arms. Returns the rig's outcome (None: the rig cannot tell) and
     the steps taken.

@@ -1,0 +1,66 @@
+"""What the twin's stages share: one seed's job, the params it reads again in its worker, the recordings' folders and
+their Parquet schema (the same for the twin's recordings and the robots').
+
+The twin's stages mirror :mod:`lfdt.jobs`: :mod:`lfdt.twin.collect` (``twin_collect``), :mod:`lfdt.twin.train`
+(``twin_train``) and :mod:`lfdt.twin.evaluate` (``twin_evaluate``), each importing only what its stage runs, so that
+an edit of the translator reruns training, never data collection.
+
+Data layout per task and seed (``<root>/<task>/s<seed>/``, the root dvc.yaml's ``paths.twin_data``), each a
+recording directory of per-episode Parquet files: ``random_Y``, ``random_R1H``, ``random_HR2``, ``demos_R1H``,
+``demos_HR2``. With backend 'sim' the twin writes them, one data set per seed; with backend 'real' they are the
+recordings made on the robots with ``python -m lfdt.robot record-random`` / ``record-demos`` under
+``twin.real_dir/<task>/`` (one set, the same for every seed). Models go to ``<models>/<task>/s<seed>/`` (dvc.yaml's
+``paths.twin_models``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from lfdt import data, layout
+from lfdt.config import TwinParams
+from lfdt.tasks import registry
+
+
+def twin_schema(task: str, domain: str, kind: str, metadata: dict):
+    """The Parquet schema of twin and robot recordings (the same conventions as the simulated experiment's data):
+    'random' records both slots' relative targets, 'demos' only the robot's."""
+    tl = registry.get(task).layout
+    if kind == "random":
+        actions = tl.action_columns(domain)
+    else:
+        actions = tl.arm_action_columns(layout.robot_arm(domain))
+    return data.transitions_schema(tl.state_columns(domain), actions, metadata={
+        "kind": kind, "task": task, "domain": domain, "layout": tl.describe(), **metadata})
+
+
+def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
+    """The recording directories of a task's run with one seed under ``root`` (the twin's data folder)."""
+    base = Path(root) / task / f"s{seed}"
+    names = [f"random_{d}" for d in layout.DOMAINS] + [f"demos_{p}" for p in layout.PAIRINGS]
+    return {n: base / n for n in names}
+
+
+@dataclass(frozen=True)
+class SeedJob:
+    """One seed's share of a twin stage, run in a worker process (:func:`lfdt.parallel.run_jobs`): the stage's
+    params file is read again there, so that a job carries only paths."""
+
+    task: str
+    seed: int
+    params: str
+    """The stage's params.yaml."""
+    data_root: str | None = None
+    """The twin's data folder (its ``<task>/s<seed>/`` recordings)."""
+    models_dir: str | None = None
+    """This seed's models (``<models>/<task>/s<seed>/``)."""
+    video_dir: str | None = None
+    """Where this seed's rollout videos go (None: no videos)."""
+
+
+def twin_params(job: SeedJob) -> tuple[TwinParams, str]:
+    from lfdt.stage import params
+
+    p = params(job.params)
+    return p.twin, p.device
