@@ -49,7 +49,7 @@ def run() -> None:
     for task in p.twin.tasks:
         runs = seed_runs(args.twin_runs / f"{task}_train.json")
         jobs += [(args.twin_models / task / f"s{s}" / method, runs[s], task, method, s, None, None)
-                 for s in p.twin.seeds for method in twin.METHODS]
+                 for s in p.twin.seeds for method in twin.TWIN_METHODS]
     missing = [j for j in jobs if not j[0].is_dir()]
     if missing:
         raise SystemExit(f"error: no trained policy in {missing[0][0]} ({len(missing)} missing; `dvc repro` trains "

@@ -14,7 +14,7 @@ from lfdt.twin.common import SeedJob
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
     """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots (of the policies of ``seed``)."""
     rows = []
-    for method in twin.METHODS:
+    for method in twin.TWIN_METHODS:
         path = Path(real_dir) / task / f"deploy_{method}.csv"
         trials = deploy_log.read_trials(path)
         if not trials:
@@ -45,8 +45,8 @@ def run() -> None:
             rows = [r for per in parallel.run_jobs(twin_evaluate.twin_evaluate_job, jobs, all_params.grid.workers,
                                                    total=len(jobs), desc=f"twin_evaluate {task}", unit="seed")
                     for r in per]
-        summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.METHODS}
-        counts = {m: sum(r["method"] == m for r in rows) for m in twin.METHODS}
+        summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.TWIN_METHODS}
+        counts = {m: sum(r["method"] == m for r in rows) for m in twin.TWIN_METHODS}
         f.metrics({f"{m}/successes": v for m, v in summary.items()})
         f.metrics({f"{m}/success_rate": summary[m] / max(counts[m], 1) for m in summary})
         f.report.update({"task": task, "backend": p.backend, "start_states": p.start_states, "trials": counts,

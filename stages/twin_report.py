@@ -36,7 +36,7 @@ def run() -> None:
     for task in p.tasks:
         ev = json.loads((args.twin_reports / f"{task}_eval.json").read_text())
         rows += [{k: r[k] for k in ("task", "method", "seed", "trial", "success")} for r in ev["per_trial"]]
-        for method in twin.METHODS:
+        for method in twin.TWIN_METHODS:
             trials = [r for r in ev["per_trial"] if r["method"] == method]
             k, n = sum(r["success"] for r in trials), len(trials)
             seeds = sorted({r["seed"] for r in trials})

@@ -82,17 +82,18 @@ def merge(base: dict, over: dict) -> dict:
     return out
 
 
-def smoke_params_yaml() -> str:
-    """params.yaml's text for the smoke run."""
+def smoke_params_yaml(overrides: dict | None = None) -> str:
+    """params.yaml's text for the smoke run (``overrides`` laid over the smoke params, section by section)."""
     params = merge(yaml.safe_load((ROOT / "params.yaml").read_text()),
                    yaml.safe_load((ROOT / "tests/smoke_params.yaml").read_text()))
+    params = merge(params, overrides or {})
     validate_params(params)
     return yaml.safe_dump(params, sort_keys=False)
 
 
-def make_project(dst: Path, commit: bool = False) -> Path:
-    """The project's code, dvc.yaml and the smoke params in ``dst``, a git and DVC repository (committed when
-    ``commit``: a sweep's chains clone a commit)."""
+def make_project(dst: Path, commit: bool = False, overrides: dict | None = None) -> Path:
+    """The project's code, dvc.yaml and the smoke params (with ``overrides``) in ``dst``, a git and DVC repository
+    (committed when ``commit``: a sweep's chains clone a commit)."""
     dst.mkdir(parents=True, exist_ok=True)
     for name in PROJECT_FILES:
         src = ROOT / name
@@ -100,7 +101,7 @@ def make_project(dst: Path, commit: bool = False) -> Path:
             shutil.copytree(src, dst / name, ignore=shutil.ignore_patterns("__pycache__"))
         else:
             shutil.copy2(src, dst / name)
-    (dst / "params.yaml").write_text(smoke_params_yaml())
+    (dst / "params.yaml").write_text(smoke_params_yaml(overrides))
     subprocess.run(["git", "init", "-q"], cwd=dst, check=True)
     dvc(["init", "-q"], dst)
     dvc(["config", "core.analytics", "false"], dst)

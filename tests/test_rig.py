@@ -28,7 +28,7 @@ from lfdt.robot import fake_mycobot as fm
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyError, SimArm, TrackingLost
 from lfdt.robot.calibration import calibration_from_intrinsics, save_calibration
-from lfdt.robot.cli import METHODS, TASKS, build_parser, main
+from lfdt.robot.cli import TASKS, build_parser, main
 from lfdt.robot.real_rig import CLIP_MARGIN_MM, RealRig
 from lfdt.robot.rig_config import (
     RigConfigError,
@@ -87,7 +87,7 @@ def test_example_config_is_valid_and_errors_name_the_key(tmp_path: Path) -> None
 
 
 def test_cli_lists_match_the_pipeline() -> None:
-    assert TASKS == registry.PLANAR and METHODS == twin.METHODS
+    assert TASKS == registry.PLANAR
     a = build_parser().parse_args(["record-random", "--sim", "--task", "block_push", "--domain", "Y", "--episodes",
                                    "1", "--steps", "2", "--out", "x"])
     assert a.func.__name__ == "run_record_random" and a.seed == 0 and a.step_delay == 0.0
@@ -218,7 +218,7 @@ def tiny_models(tmp_path_factory) -> Path:
 
 def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_path: Path, capsys) -> None:
     real_dir = tmp_path / "real"
-    for method in METHODS:
+    for method in twin.TWIN_METHODS:
         log = real_dir / "block_push" / f"deploy_{method}.csv"
         args = ["deploy", "--sim", "--task", "block_push", "--method", method, "--models", str(tiny_models),
                 "--log", str(log)]
@@ -237,7 +237,7 @@ def test_deploy_sim_appends_trials_the_stage_can_read(tiny_models: Path, tmp_pat
     stage = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(stage)
     rows = stage.real_trials("block_push", str(real_dir))
-    assert [(r["method"], r["trial"]) for r in rows] == [(m, i) for m in METHODS for i in range(3)]
+    assert [(r["method"], r["trial"]) for r in rows] == [(m, i) for m in twin.TWIN_METHODS for i in range(3)]
 
 
 def test_sim_rig_interface() -> None:

@@ -130,8 +130,11 @@ def _kill_chain_when_a_stage_runs(proc: subprocess.Popen, chain: str, stage_scri
 
 @pytest.fixture(scope="module")
 def coordinator(tmp_path_factory) -> Path:
-    """The workspace the sweeps of this module start from (the smoke params, committed)."""
-    return smoke.make_project(tmp_path_factory.mktemp("sweep") / "coordinator", commit=True)
+    """The workspace the sweeps of this module start from (the smoke params, committed), with each matrix stage's
+    seeds in one process (``grid.workers: 1``) where the plain smoke run splits them over two: the tables must still
+    be the plain run's byte for byte (a seed's result does not depend on the workers), and no chain spawns workers."""
+    return smoke.make_project(tmp_path_factory.mktemp("sweep") / "coordinator", commit=True,
+                              overrides={"grid": {"workers": 1}})
 
 
 def test_sweep_with_a_killed_chain_resumes_and_gives_the_plain_repro_tables(smoke_tables, cluster, coordinator):

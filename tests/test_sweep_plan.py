@@ -43,7 +43,8 @@ def test_plan_splits_the_dag_into_shared_independent_chains_and_final(repo):
         order = {s: i for i, s in enumerate(stages)}
         assert all(order[b] < order[a] for a, b in g.subgraph(stages).edges)  # upstream first
     assert {"train_experts", "fit_dynamics", "collect_demos", "collect_random"} <= set(plan.shared)
-    assert {"report", "twin_report", "fingerprint"} == set(plan.final)  # fingerprint: no upstream, nothing downstream
+    # fingerprint: no upstream, nothing downstream; register_policies: the policies of every chain
+    assert {"report", "twin_report", "fingerprint", "register_policies"} == set(plan.final)
     # lfdt_track re-executes lfdt's translations: one chain; the twin of each task is one chain
     assert {"train_translator@lfdt-50", "track_demos@50", "bc_evaluate@lfdt_track-50"} <= \
         set(plan.chains["train_translator@lfdt-50"])

@@ -39,7 +39,6 @@ EXIT_FAILED = 2
 EXIT_INTERRUPTED = 130
 """Ctrl-C (128 + SIGINT), as shells report it."""
 TASKS = registry.PLANAR
-METHODS = twin.METHODS
 
 
 def positive_int(text: str) -> int:
@@ -493,7 +492,7 @@ def add_deploy_parser(subparsers) -> None:
                                           "after those already in the log. The DVC stage twin_evaluate reads "
                                           "real_dir/TASK/deploy_METHOD.csv with twin.backend: real.")
     add_rig_arguments(p, task_required=True)
-    p.add_argument("--method", required=True, choices=METHODS)
+    p.add_argument("--method", required=True, choices=twin.TWIN_METHODS)
     p.add_argument("--models", required=True, metavar="DIR|URI",
                    help="trained models of one seed, e.g. models/twin/TASK/s0, or a registered policy, e.g. "
                         "models:/TASK.METHOD@seed3 (reports/models.csv lists them)")

@@ -6,8 +6,9 @@
 to the tasks (:mod:`lfdt.tasks`); the hardware-free rig and the recorder to :mod:`lfdt.rig`.
 """
 
-METHODS: tuple[str, ...] = ("bc_no_translation", "lfdt")
-"""The methods run on the real-robot tasks (records of :mod:`lfdt.methods`), as in the paper's §IV-E."""
+TWIN_METHODS: tuple[str, ...] = ("bc_no_translation", "lfdt")
+"""The methods run on the real-robot tasks (names of records in :data:`lfdt.methods.METHODS`), as in the paper's
+§IV-E."""
 PAPER_REAL: dict[str, dict[str, tuple[int, int]]] = {
     "block_push": {"lfdt": (10, 10), "bc_no_translation": (10, 10)},
     "peg_insertion": {"lfdt": (8, 10), "bc_no_translation": (2, 10)}}

@@ -11,7 +11,7 @@ from lfdt import bc
 from lfdt.config import TwinParams
 from lfdt.tasks import registry
 from lfdt.tasks.planar_env import TwinConfig, TwinEnv
-from lfdt.twin import METHODS
+from lfdt.twin import TWIN_METHODS
 from lfdt.twin.common import SeedJob, twin_params
 
 
@@ -43,7 +43,7 @@ def evaluate_seed(task: str, p: TwinParams, seed: int, models_dir: str | Path,
     ``video_root/<task>-<method>`` when it is given."""
     rows = []
     with torch.no_grad():
-        for method in METHODS:
+        for method in TWIN_METHODS:
             policy = load_policy(task, method, models_dir)
             vdir = Path(video_root) / f"{task}-{method}" if video_root else None
             for r in evaluate_policy(task, policy, p.trials, purpose=p.start_states,

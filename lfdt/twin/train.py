@@ -16,7 +16,7 @@ from lfdt.dynamics import fit_dynamics, load_random_y
 from lfdt.nets import save_state
 from lfdt.tasks import registry
 from lfdt.tasks.planar_env import TwinConfig
-from lfdt.twin import METHODS
+from lfdt.twin import TWIN_METHODS
 from lfdt.twin.common import SeedJob, recordings, twin_params
 
 
@@ -61,7 +61,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
            "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag,
                           **{f"hand_offset_m/{c}": v for c, v in trs[0].hand_offset_m(tl).items()}}}
     bcfg = p.bc_for(task)
-    for method in METHODS:
+    for method in TWIN_METHODS:
         members_data = bc.tasks_for(method, translated=translated, raw_demos=raw, tl=tl)
         if bcfg.recovery_copies and methods.get(method).data != "raw":
             for t in members_data:
