@@ -21,14 +21,11 @@ setup: $(STAMP)  ## create .venv and install the pinned dependencies
 reproduce: setup  ## run the whole pipeline with params.yaml
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/dvc repro
 
-# Three pytest workers on the project's two cores: the smoke project's tests (one xdist_group) run on one, the sweep's
-# (another) on the second, the unit tests on the third; the two DAGs wait on their stages' processes about a third of
-# the time, which the third worker fills (2 workers: 12.1 min of pytest, 3: see docs/testing.md). PYTEST_WORKERS=2
-# for a machine with less memory.
-PYTEST_WORKERS ?= 3
-test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (3 workers); installs PostgreSQL if it can
+# Two pytest workers, one per core of the project's machine; the smoke project's tests (one xdist_group) run on one,
+# the sweep's (another) on the other, and the smoke DAG is built once (tests/conftest.py).
+test: setup  ## unit tests and a smoke run of the whole DAG on tiny params (2 workers); installs PostgreSQL if it can
 	tools/test_prereqs.sh
-	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=15; rc=$$?; \
+	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadgroup --durations=15; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "error: pytest collected no tests (exit code 5)" >&2; fi; exit $$rc
 
 smoke: setup  ## the whole DAG on tiny params (tests/smoke_params.yaml) in a temporary copy (most of `make test`)
