@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from pymycobot.common import ProtocolCode
 
+from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot import fake_mycobot as fm
 from lfdt.robot.arm import (
     Arm,
@@ -30,7 +31,6 @@ from lfdt.robot.arm import (
     SimArm,
     TrackingLost,
     check_command,
-    stop_on_interrupt,
 )
 from lfdt.robot.cli import build_parser, main
 from lfdt.robot.kinematics import position

@@ -4,8 +4,8 @@
   silent failures (``-1``, ``None``, short lists) into :class:`ArmNotResponding`.
 * :class:`SimArm` holds joint angles and follows commands with a lag, for dry runs and tests.
 * :class:`SafeArm` validates every command (joint limits, speed, flange workspace box, largest step per joint)
-  before anything is sent, stops the arm when tracking is lost, and :func:`stop_on_interrupt` stops and closes it
-  on Ctrl-C.
+  before anything is sent, stops the arm when tracking is lost, and :func:`lfdt.rig.interrupt.stop_on_interrupt`
+  stops and closes it on Ctrl-C.
 
 pymycobot's timing (4.0.7): the constructors sleep 1.5 s; each synchronous command waits for a reply whose 4th
 byte is the command code, 0.5 s (serial) or 0.3 s (TCP) per try, 3 tries, re-sending the command each try, then
@@ -23,7 +23,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
-from lfdt.rig.interrupt import emergency_stop, stop_on_interrupt  # noqa: F401  (the arm's Ctrl-C handling)
 from lfdt.robot.kinematics import DH, JOINT_LIMITS_DEG, position
 
 

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lfdt import twin
+from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot.arm import (
     ArmNotResponding,
     MyCobotArm,
@@ -30,7 +31,6 @@ from lfdt.robot.arm import (
     SafetyLimits,
     TrackingLost,
     check_command,
-    stop_on_interrupt,
 )
 from lfdt.tasks import registry
 
