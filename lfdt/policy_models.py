@@ -10,7 +10,7 @@ Every policy the pipeline trains becomes an MLflow pyfunc model (``stages/regist
   seed, with the alias ``seed<N>``: ``models:/box_push.lfdt.d50@seed100``, ``models:/block_push.lfdt@seed3``.
 
 The model's code is :mod:`lfdt.policy_pyfunc` (MLflow's "models from code": nothing is pickled). Loading needs
-this package installed (``make setup``). :func:`load_policy` turns a ``models:/`` (or ``runs:/``) URI back into a
+this package installed (``make setup``). :func:`policy_from_uri` turns a ``models:/`` (or ``runs:/``) URI back into a
 :class:`lfdt.bc.BCPolicy`, for the robot's and the twin's ``deploy``.
 """
 
@@ -34,7 +34,7 @@ CONFIG_ARTIFACT = "lfdt_model"
 ``model_config`` would be logged as params of the training run, where the twin's two methods would clash."""
 MODEL_CODE = Path(__file__).with_name("policy_pyfunc.py")
 URI_SCHEMES = ("models:/", "runs:/")
-"""Where :func:`load_policy` takes an MLflow URI instead of a folder."""
+"""Where :func:`policy_from_uri` takes an MLflow URI instead of a folder."""
 
 
 def registered_name(task: str, method: str, demos: int | None = None) -> str:
@@ -148,7 +148,7 @@ def log_policy(policy_dir: Path, *, run_id: str, task: str, method: str, seed: i
             "run_id": run_id, "task": task, "method": method, "demos": demos, "seed": seed}
 
 
-def load_policy(uri: str, task: str, method: str) -> bc.BCPolicy:
+def policy_from_uri(uri: str, task: str, method: str) -> bc.BCPolicy:
     """The policy behind a ``models:/`` or ``runs:/`` URI, checked to be ``task``'s ``method``; ValueError naming
     the model's own task and method otherwise. The registry is the project's tracking store
     (:func:`lfdt.mlflow_runs.tracking_uri`: ``MLFLOW_TRACKING_URI``, else the workspace's mlflow.db)."""

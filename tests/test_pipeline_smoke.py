@@ -309,11 +309,11 @@ def test_every_policy_is_a_registered_mlflow_model(project, tmp_path):
             assert uri in {r["uri"] for r in rows}
             bounds = (-1.0, 1.0) if task == "box_push" else None
             saved, _ = bc.BCPolicy.load(dst / folder, registry.get(task).layout, bounds)
-            loaded = policy_models.load_policy(uri, task, method)
+            loaded = policy_models.policy_from_uri(uri, task, method)
             obs = policy_models.input_example(task).to_numpy()[0]
             assert np.array_equal(loaded(obs), saved(obs)), f"{uri} acts otherwise than {folder}"
             with pytest.raises(ValueError, match="not the"):
-                policy_models.load_policy(uri, task, "lfdt_no_id")
+                policy_models.policy_from_uri(uri, task, "lfdt_no_id")
             model = mlflow.models.get_model_info(uri)
             assert model.signature.inputs.input_names() == registry.get(task).layout.state_columns("Y")
             example = Path(mlflow.artifacts.download_artifacts(f"{uri}/serving_input_example.json",

@@ -522,7 +522,7 @@ def run_deploy(args: argparse.Namespace) -> int:
         from mlflow.exceptions import MlflowException
 
         try:
-            policy = policy_models.load_policy(args.models, task, args.method)
+            policy = policy_models.policy_from_uri(args.models, task, args.method)
         except (MlflowException, ValueError) as e:
             print(f"error: --models {args.models}: {e}", file=sys.stderr)
             return EXIT_FAILED
