@@ -60,6 +60,7 @@ class SeedJob:
 
 
 def twin_params(job: SeedJob) -> tuple[TwinParams, str]:
+    """The twin's params and the training device, read again from the job's params file in its worker."""
     from lfdt.stage import params
 
     p = params(job.params)
