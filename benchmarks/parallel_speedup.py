@@ -1,6 +1,6 @@
 """Speed-up of running a matrix stage's seeds side by side (lfdt.parallel.run_jobs) against running them serially.
 
-The jobs are what the translator stage runs: lfdt.translation.train_translator (G, D, frozen F and F^-1, the
+The jobs are what the translator stage runs: lfdt.translation.training.train_translator (G, D, frozen F and F^-1, the
 kinematics of Y, held-out selection) on synthetic data of the real shapes, one job per seed. Both ways are timed
 in one run, alternately, and the ratio of the medians reported: serial wall time / parallel wall time.
 Writes benchmarks/results/parallel_speedup.json.
@@ -20,16 +20,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfdt import layout, parallel, translation
+from lfdt import layout, parallel
+from lfdt.box_push_jobs.translator import box_push_kinematics
 from lfdt.config import EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.jobs.translator import box_push_kinematics
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
+from lfdt.translation.training import train_translator
+from lfdt.translation.transitions import Transitions
 
 
-def _transitions(n: int, rng: np.random.Generator) -> translation.Transitions:
+def _transitions(n: int, rng: np.random.Generator) -> Transitions:
     x = rng.normal(size=(n, 21)).astype(np.float32)
-    return translation.Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
+    return Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
 
 
 def translator_job(job: tuple[int, int], progress=None) -> float:
@@ -44,8 +46,8 @@ def translator_job(job: tuple[int, int], progress=None) -> float:
     dyn = DynamicsModels(19, 6, [256, 256, 256])
     cfg = TranslatorConfig(iterations=iterations, select_every=500, log_every=500)
     t0 = time.perf_counter()
-    translation.train_translator(demos, rand, y, dyn, cfg, seed=seed, progress=progress, held_out=held,
-                                 kinematics=box_push_kinematics(EnvConfig()), tl=box_layout.BOX_PUSH)
+    train_translator(demos, rand, y, dyn, cfg, seed=seed, progress=progress, held_out=held,
+                     kinematics=box_push_kinematics(EnvConfig()), tl=box_columns.BOX_PUSH)
     return time.perf_counter() - t0
 
 

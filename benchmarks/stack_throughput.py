@@ -1,6 +1,6 @@
 """Ten seeds trained as one stacked model against ten seeds one at a time, on one core, in one run.
 
-translator: lfdt.translation.train_translators with a stack of 10 members against 10 calls with one member each
+translator: lfdt.translation.training.train_translators with a stack of 10 members against 10 calls with one each
             (the default translator config: batch 128, G and D of 256 x 2, F and F^-1 of 256 x 3);
 bc:         lfdt.bc.train_members with 10 members against 10 calls with one each (batch 32, 256 x 2);
 evaluate:   200 trials of 10 policies stepped in lockstep (one policy call per control step for all) against each
@@ -22,19 +22,21 @@ import numpy as np
 import pandas as pd
 import torch
 
-from lfdt import bc, evaluation, layout, numerics, translation
+from lfdt import bc, evaluation, layout, numerics
+from lfdt.box_push_jobs.evaluate import box_push_trials
+from lfdt.box_push_jobs.translator import box_push_kinematics
 from lfdt.config import BCConfig, EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.jobs.evaluate import box_push_trials
-from lfdt.jobs.translator import box_push_kinematics
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
+from lfdt.translation.training import Member, train_translators
+from lfdt.translation.transitions import Transitions
 
-TL = box_layout.BOX_PUSH
+TL = box_columns.BOX_PUSH
 
 
-def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> translation.Transitions:
+def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> Transitions:
     x = rng.normal(size=(n, dim)).astype(np.float32)
-    return translation.Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
+    return Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
 
 
 def translator_rate(seeds: int, stacked: bool, iters: int) -> float:
@@ -42,13 +44,13 @@ def translator_rate(seeds: int, stacked: bool, iters: int) -> float:
     dyn = DynamicsModels(19, 6, [256, 256, 256])
     rand = {p: fake_transitions(20_000, 21, rng) for p in layout.PAIRINGS}
     y = rng.normal(size=(20_000, 19)).astype(np.float32)
-    members = [translation.Member({p: fake_transitions(2_000, 21, rng) for p in layout.PAIRINGS}, s)
+    members = [Member({p: fake_transitions(2_000, 21, rng) for p in layout.PAIRINGS}, s)
                for s in range(seeds)]
     cfg = TranslatorConfig(iterations=iters, select_every=10 ** 6, log_every=10 ** 6)
     kin = box_push_kinematics(EnvConfig())
     t0 = time.perf_counter()
     for group in ([members] if stacked else [[m] for m in members]):
-        translation.train_translators(group, rand, y, dyn, cfg, tl=TL, kinematics=kin)
+        train_translators(group, rand, y, dyn, cfg, tl=TL, kinematics=kin)
     return seeds * iters / (time.perf_counter() - t0)
 
 

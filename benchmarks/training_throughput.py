@@ -1,6 +1,6 @@
 """Translator and BC training speed as a ratio to a bare torch loop over the same networks and batch size.
 
-ours:  lfdt.translation.train_translator / lfdt.bc.train_member (sampling, losses, diagnostics, checkpoint
+ours:  lfdt.translation.training.train_translator / lfdt.bc.train_member (sampling, losses, diagnostics, checkpoint
        selection included), iterations per second.
 bare:  a minimal loop doing the same forward/backward/Adam steps on pre-drawn random tensors of the same shapes
        (G, D and the frozen F, F^-1 for the translator; the policy MLP for BC), nothing else.
@@ -24,25 +24,27 @@ import pandas as pd
 import torch
 import torch.nn.functional as nnf
 
-from lfdt import bc, layout, translation
+from lfdt import bc, layout
+from lfdt.box_push_jobs.translator import box_push_kinematics
 from lfdt.config import BCConfig, EnvConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.jobs.translator import box_push_kinematics
 from lfdt.nets import mlp
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
+from lfdt.translation.training import train_translator
+from lfdt.translation.transitions import Transitions
 
 
-def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> translation.Transitions:
+def fake_transitions(n: int, dim: int, rng: np.random.Generator) -> Transitions:
     x = rng.normal(size=(n, dim)).astype(np.float32)
-    return translation.Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
+    return Transitions(x=x, x2=x + 0.01, episode=np.arange(n) // 20, frame=np.arange(n) % 20, x_prev=x)
 
 
 def ours_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels, rng) -> float:
     demos = {p: fake_transitions(2_000, 21, rng) for p in layout.PAIRINGS}
     rand = {p: fake_transitions(20_000, 21, rng) for p in layout.PAIRINGS}
     y = rng.normal(size=(20_000, 19)).astype(np.float32)
-    _, st = translation.train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0,
-                                         kinematics=box_push_kinematics(EnvConfig()), tl=box_layout.BOX_PUSH)
+    _, st = train_translator(demos, rand, y, dyn, cfg.model_copy(update={"iterations": iters}), seed=0,
+                             kinematics=box_push_kinematics(EnvConfig()), tl=box_columns.BOX_PUSH)
     return st["iterations_per_s"]
 
 
@@ -78,10 +80,10 @@ def bare_translator(iters: int, cfg: TranslatorConfig, dyn: DynamicsModels) -> f
 def ours_bc(iters: int, cfg: BCConfig, rng) -> float:
     n = 9_000
     df = pd.DataFrame(rng.normal(size=(n, 25)).astype(np.float32),
-                      columns=[layout.STATE_PREFIX + c for c in box_layout.state_columns("Y")] +
-                      [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")])
+                      columns=[layout.STATE_PREFIX + c for c in box_columns.state_columns("Y")] +
+                      [layout.ACTION_PREFIX + c for c in box_columns.action_columns("Y")])
     df["episode_index"] = np.arange(n) // 25
-    task = bc.tasks_for("lfdt", translated=df, tl=box_layout.BOX_PUSH)[0]
+    task = bc.tasks_for("lfdt", translated=df, tl=box_columns.BOX_PUSH)[0]
     _, st = bc.train_member(task, cfg.model_copy(update={"iterations": iters}), seed=0)
     return st["iterations_per_s"]
 

@@ -7,12 +7,10 @@ a wrong type or an impossible value raises :class:`ParamsError` naming the key a
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-
-from lfdt.tasks.box_push import layout as box_layout
 
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
@@ -112,6 +110,10 @@ class RewardConfig(Strict):
 class EnvConfig(Strict):
     """The simulated 2D dual-arm box push (all three domains)."""
 
+    JOINTS: ClassVar[dict[str, int]] = {"robot": 3, "human": 4}
+    """Joints of each robot and of the human stand-in: the box push's column layout
+    (:mod:`lfdt.tasks.box_push.columns`) is built from these, so ``links`` must match them."""
+
     timestep: PosFloat = 0.005
     """Physics time step, s."""
     frame_skip: PosInt = 10
@@ -145,12 +147,11 @@ class EnvConfig(Strict):
 
     @model_validator(mode="after")
     def _joint_counts(self) -> EnvConfig:
-        # every data file, network and translator is laid out for these joint counts (lfdt.tasks.box_push.layout)
-        for name, arm in (("robot", "r1"), ("human", "h")):
-            want = box_layout.ARM_JOINTS[arm]
+        # every data file, network and translator is laid out for these joint counts (lfdt.tasks.box_push.columns)
+        for name, want in self.JOINTS.items():
             if len(getattr(self, name).links) != want:
                 raise ValueError(f"{name}.links has {len(getattr(self, name).links)} links; the state layout "
-                                 f"(lfdt/tasks/box_push/layout.py ARM_JOINTS) is built for {want}")
+                                 f"(lfdt/config.py EnvConfig.JOINTS) is built for {want}")
         return self
 
 
@@ -427,6 +428,11 @@ class TranslatorConfig(Strict):
     """Iterations between diagnostics sent to MLflow."""
     torch_threads: PosInt = 1
     """Torch CPU threads."""
+
+    @property
+    def steps(self) -> int:
+        """Training iterations of one seed, all its restarts together (what a stage's progress bar counts)."""
+        return self.iterations * self.restarts
 
 
 class TrackConfig(Strict):

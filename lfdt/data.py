@@ -28,10 +28,12 @@ import pyarrow.parquet as pq
 from lfdt import layout
 from lfdt.errors import StageError
 from lfdt.files import temp_path
-from lfdt.tasks.box_push import layout as box_layout
 
 META_KEY = b"lfdt"
 INDEX_COLUMNS = ("episode_index", "frame_index", "timestamp")
+UNNAMED_TASK = "box_push"
+"""The task of a file whose metadata names none: the simulated box push's files were written before tasks had
+names (its registry key, :data:`lfdt.tasks.registry.TASKS`)."""
 
 
 def _unit(name: str) -> str:
@@ -168,7 +170,7 @@ def check_identity(path: str | Path, kind: str | None = None, domain: str | None
         raise
     except ValueError as e:
         raise DataFileError(str(e)) from None
-    have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", box_layout.BOX_PUSH.name)}
+    have = {"kind": meta.get("kind"), "domain": meta.get("domain"), "task": meta.get("task", UNNAMED_TASK)}
     want = {"kind": kind, "domain": domain, "task": task}
     wrong = [f"{k} {have[k]!r} where {v!r} is needed" for k, v in want.items() if v is not None and have[k] != v]
     if wrong:

@@ -5,7 +5,7 @@ Robot1 stands (left, x < 0), slot 2 where Robot2 stands (right). In domain X the
 stand-in takes one slot: R1H = (Robot1, Human), HR2 = (Human, Robot2). Domain Y = (Robot1, Robot2).
 
 Which columns an arm and the object contribute is the task's own :class:`TaskLayout`: the box push's is
-:data:`lfdt.tasks.box_push.layout.BOX_PUSH` (joint angles, joint velocities and end position per arm), a
+:data:`lfdt.tasks.box_push.columns.BOX_PUSH` (joint angles, joint velocities and end position per arm), a
 real-robot task's comes from :attr:`lfdt.tasks.base.PlanarTask.layout`. Column names are ``<arm>.<quantity>``.
 """
 
@@ -39,7 +39,7 @@ class TaskLayout:
     """The column layout of one task: state columns per arm, action columns per arm, object columns.
 
     Domains and slots are shared by every task (:data:`DOMAIN_ARMS`); the box push of the simulated
-    experiment is :data:`lfdt.tasks.box_push.layout.BOX_PUSH`, the real-robot tasks' layouts come from
+    experiment is :data:`lfdt.tasks.box_push.columns.BOX_PUSH`, the real-robot tasks' layouts come from
     :mod:`lfdt.tasks`.
     """
 

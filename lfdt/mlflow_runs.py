@@ -310,13 +310,10 @@ class RunNotFound(StageError):
     """A run a parent run should adopt is not in the tracking store the stage logs to."""
 
 
-def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:
-    """Make runs children of a parent run (the MLflow UI nests them); returns how many.
-
-    Every id must name a run of the current tracking store: one that is missing (the store was replaced, or a sweep's
-    workers logged elsewhere) raises RunNotFound naming it and the store, never a silent skip, since the parent run
-    would then not hold what its table was built from.
-    """
+def require_runs(run_ids: list[str], what: str) -> list[str]:
+    """The distinct ``run_ids``, in order, after checking that each names a run of the current tracking store; one
+    that is missing (the store was replaced, or the stages that logged it wrote elsewhere) raises RunNotFound naming
+    it, ``what`` the runs are (e.g. "behind this report") and the store."""
     import mlflow
     from mlflow.exceptions import MlflowException
 
@@ -329,9 +326,22 @@ def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:
         except MlflowException:
             missing.append(rid)
     if missing:
-        raise RunNotFound(f"{len(missing)} of the {len(ids)} runs behind this report are not in the tracking store "
+        raise RunNotFound(f"{len(missing)} of the {len(ids)} runs {what} are not in the tracking store "
                           f"{tracking_uri()} (first: {missing[0]}): the stages that logged them wrote to another "
                           f"store; rerun them here (`dvc repro -f <stage>`), or point MLFLOW_TRACKING_URI at theirs")
+    return ids
+
+
+def adopt_children(parent_run_id: str, run_ids: list[str]) -> int:
+    """Make runs children of a parent run (the MLflow UI nests them); returns how many.
+
+    Every id must name a run of the current tracking store (:func:`require_runs`), never a silent skip, since the
+    parent run would then not hold what its table was built from.
+    """
+    import mlflow
+
+    client = mlflow.MlflowClient()
+    ids = require_runs(run_ids, "behind this report")
     for rid in ids:
         _retry(lambda r=rid: client.set_tag(r, "mlflow.parentRunId", parent_run_id))
     return len(ids)

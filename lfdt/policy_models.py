@@ -97,26 +97,6 @@ def input_example(task: str) -> pd.DataFrame:
     return pd.DataFrame([np.asarray(obs, dtype=np.float64)], columns=registry.get(task).layout.state_columns("Y"))
 
 
-def check_runs(run_ids: list[str]) -> None:
-    """Raise :class:`lfdt.mlflow_runs.RunNotFound` naming the first of ``run_ids`` the tracking store lacks (the
-    policies would otherwise be logged into runs of another store's history)."""
-    from mlflow.exceptions import MlflowException
-
-    from lfdt.mlflow_runs import RunNotFound, tracking_uri
-
-    client = mlflow.MlflowClient()
-    missing = []
-    for rid in dict.fromkeys(run_ids):
-        try:
-            client.get_run(rid)
-        except MlflowException:
-            missing.append(rid)
-    if missing:
-        raise RunNotFound(f"{len(missing)} runs that trained the policies are not in the tracking store "
-                          f"{tracking_uri()} (first: {missing[0]}): rerun their stages here (`dvc repro -f`), or "
-                          "point MLFLOW_TRACKING_URI at their store")
-
-
 def log_policy(policy_dir: Path, *, run_id: str, task: str, method: str, seed: int, demos: int | None,
                action_bounds: tuple[float, float] | None, example: pd.DataFrame,
                requirements: list[str]) -> dict[str, Any]:

@@ -3,8 +3,8 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import data, layout, stage
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push import experts
-from lfdt.tasks.box_push import layout as box_layout
 
 
 def run() -> None:
@@ -31,7 +31,7 @@ def run() -> None:
         with f.progress(cfg.per_pairing, f"demos {args.pairing}", "demo") as bar:
             table, stats = experts.collect_demos(model, args.pairing, p.env, cfg, progress=lambda: bar.update(1))
         data.write_table(table, out)
-        data.check_transitions(out, "demos", args.pairing, box_layout.BOX_PUSH)
+        data.check_transitions(out, "demos", args.pairing, box_columns.BOX_PUSH)
         f.metrics(stats)
         f.report.update({"pairing": args.pairing, **stats})
     print(f"{args.pairing}: {stats['demonstrations']} demonstrations from {stats['attempts']} attempts, "

@@ -3,7 +3,7 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import data, layout, stage
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push import random_motion
 
 
@@ -21,7 +21,7 @@ def run() -> None:
         with f.progress(cfg.transitions, f"random {args.domain}", "tr") as bar:
             table, stats = random_motion.collect_random(args.domain, p.env, cfg, progress=bar.update)
         data.write_table(table, out)
-        data.check_transitions(out, "random", args.domain, box_layout.BOX_PUSH)
+        data.check_transitions(out, "random", args.domain, box_columns.BOX_PUSH)
         stats["file_mb"] = out.stat().st_size / 1e6
         f.metrics(stats)
         f.report.update({"domain": args.domain, **stats})

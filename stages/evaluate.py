@@ -4,8 +4,8 @@ states: the seeds split into ``grid.workers`` groups side by side, each group's 
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import methods, parallel, stage
-from lfdt.jobs import common
-from lfdt.jobs.evaluate import evaluate_job
+from lfdt.box_push_jobs import common
+from lfdt.box_push_jobs.evaluate import evaluate_job
 
 
 def run() -> None:
@@ -13,7 +13,7 @@ def run() -> None:
         "policies": "the BC policies, a folder per configuration",
         "videos": "where the videos go, a folder per (method, demos)",
         "reports": "where the report <method>-d<demos>.json and its trials go"})
-    cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, policies_dir=args.policies,
+    cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, policies_dir=args.policies,
                           videos_dir=args.videos)
     group = cfgs[0].group
     (args.videos / group).mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos

@@ -1,9 +1,11 @@
-"""DVC stage: the numeric fingerprint (lfdt/fingerprint.py): a tiny workload through every numeric component of the
-pipeline, hashed. Where the numeric code paths are pinned, every x86-64 CPU with AVX2 writes the same file."""
+"""DVC stage: the numeric fingerprint (lfdt/box_push_jobs/fingerprint.py): a tiny workload through every numeric
+component of the pipeline, hashed. Where the numeric code paths are pinned, every x86-64 CPU with AVX2
+writes the same file."""
 
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths)
 
-from lfdt import fingerprint, numerics, stage
+from lfdt import numerics, stage
+from lfdt.box_push_jobs import fingerprint
 
 
 def run() -> None:

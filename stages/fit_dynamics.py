@@ -5,9 +5,9 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 import os
 
 from lfdt import dynamics, stage
-from lfdt.jobs.common import DYNAMICS_FILE
+from lfdt.box_push_jobs.common import DYNAMICS_FILE
 from lfdt.nets import save_state, torch_device
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 
 
 def run() -> None:
@@ -17,7 +17,7 @@ def run() -> None:
     args = ap.parse_args()
     p = stage.params(args.params)
     cfg, device = p.dynamics, torch_device(p.device)
-    d = dynamics.load_random_y(str(args.random_dir / "Y.parquet"), box_layout.BOX_PUSH)
+    d = dynamics.load_random_y(str(args.random_dir / "Y.parquet"), box_columns.BOX_PUSH)
     with stage.frame(args.report, "fit_dynamics", {"dynamics": cfg.model_dump(), "device": p.device},
                      tags={"domain": "Y", "seed": cfg.seed}, run_name="fit_dynamics") as f:
         # F and F^-1 side by side in two processes when there are two cores: the same bits as one after the other
@@ -25,12 +25,12 @@ def run() -> None:
                                             workers=min(2, os.cpu_count() or 1))
         curve = res.pop("curve")
         save_state(models, args.out_dir / DYNAMICS_FILE, {
-            "dynamics": cfg.model_dump(), "state_columns": box_layout.state_columns("Y"),
-            "action_columns": box_layout.action_columns("Y"), "y_norm": models.y_norm.to_dict(),
+            "dynamics": cfg.model_dump(), "state_columns": box_columns.state_columns("Y"),
+            "action_columns": box_columns.action_columns("Y"), "y_norm": models.y_norm.to_dict(),
             "delta_scale": models.delta_scale.tolist(),
             "forward": "y_n + delta_scale * f([y_n, a])", "inverse": "g([y_n, (y2_n - y_n) / delta_scale])"})
-        groups = {"arms": [c for c in box_layout.state_columns("Y") if not c.startswith("box.")],
-                  "box": list(box_layout.OBJECT_COLUMNS)}
+        groups = {"arms": [c for c in box_columns.state_columns("Y") if not c.startswith("box.")],
+                  "box": list(box_columns.OBJECT_COLUMNS)}
         for name, cols in groups.items():
             f_mse = sum(res["forward_mse_per_column"][c] for c in cols)
             t_mse = sum(res["forward_trivial_mse_per_column"][c] for c in cols)

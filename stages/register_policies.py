@@ -8,7 +8,10 @@ import json
 from pathlib import Path
 
 from lfdt import mlflow_runs, policy_models, stage, twin
-from lfdt.jobs.common import TASK
+from lfdt.tasks import registry
+
+TABLE_I_TASK = "box_push"
+"""The task of Table I's policies (the twin's are named by params ``twin.tasks``)."""
 
 REQUIREMENTS = ("torch", "numpy", "pandas", "mujoco", "gymnasium", "mlflow", "pyarrow")
 """The libraries a policy model needs besides this package (``make setup`` installs them all), at the versions
@@ -44,17 +47,19 @@ def run() -> None:
     for method in p.grid.bc_methods:
         for demos in p.grid.demos:
             runs = seed_runs(args.bc_runs / f"{method}-d{demos}.json")
-            jobs += [(args.policies / f"{method}-d{demos}" / f"s{s}", runs[s], TASK.name, method, s, demos, (-1.0, 1.0))
+            bounds = registry.get(TABLE_I_TASK).action_bounds
+            jobs += [(args.policies / f"{method}-d{demos}" / f"s{s}", runs[s], TABLE_I_TASK, method, s, demos, bounds)
                      for s in p.grid.seeds]
     for task in p.twin.tasks:
         runs = seed_runs(args.twin_runs / f"{task}_train.json")
-        jobs += [(args.twin_models / task / f"s{s}" / method, runs[s], task, method, s, None, None)
+        bounds = registry.get(task).action_bounds
+        jobs += [(args.twin_models / task / f"s{s}" / method, runs[s], task, method, s, None, bounds)
                  for s in p.twin.seeds for method in twin.TWIN_METHODS]
     missing = [j for j in jobs if not j[0].is_dir()]
     if missing:
         raise SystemExit(f"error: no trained policy in {missing[0][0]} ({len(missing)} missing; `dvc repro` trains "
                          "them)")
-    policy_models.check_runs([j[1] for j in jobs])
+    mlflow_runs.require_runs([j[1] for j in jobs], "that trained these policies")
     examples = {task: policy_models.input_example(task) for task in {j[2] for j in jobs}}
     rows = []
     with stage.progress(len(jobs), "registering policies", "model") as bar:

@@ -5,7 +5,7 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 import pyarrow.parquet as pq
 
 from lfdt import data, layout, stage
-from lfdt.jobs import common
+from lfdt.box_push_jobs import common
 
 
 def run() -> None:
@@ -14,7 +14,7 @@ def run() -> None:
     ap.add_argument("--demos", required=True, type=int)
     args = ap.parse_args()
     p = stage.params(args.params)
-    for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data):
+    for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, p, bc_data_dir=args.bc_data):
         for pairing in layout.PAIRINGS:
             path = args.demos_dir / f"{pairing}.parquet"
             episodes = data.demo_subset(path, args.demos, cfg.seed, pairing)

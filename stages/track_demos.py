@@ -4,15 +4,15 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import methods, parallel, stage
-from lfdt.jobs import common
-from lfdt.jobs.track import track_job
+from lfdt.box_push_jobs import common
+from lfdt.box_push_jobs.track import track_job
 
 
 def run() -> None:
     args, p = stage.matrix_arguments(__doc__, [m.name for m in methods.METHODS.values() if m.data == "executed"], {
         "bc-data": "the translated demonstrations, and where the executed ones go, a folder per configuration",
         "dynamics-dir": "F and F^-1", "reports": "where the report <method>-d<demos>.json goes"})
-    cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data,
+    cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, bc_data_dir=args.bc_data,
                           dynamics_dir=args.dynamics_dir)
     group = cfgs[0].group
     with stage.frame(args.reports / f"{group}.json") as f:

@@ -4,8 +4,8 @@ stacked models, split into ``grid.workers`` groups that run side by side."""
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import methods, parallel, stage
-from lfdt.jobs import common
-from lfdt.jobs.bc import bc_job
+from lfdt.box_push_jobs import common
+from lfdt.box_push_jobs.bc import bc_job
 from lfdt.nets import torch_device
 
 
@@ -16,7 +16,7 @@ def run() -> None:
         "policies": "where the policies go, a folder per configuration",
         "reports": "where the report <method>-d<demos>.json and its learning curve go"})
     torch_device(p.device)  # before any job starts
-    cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, bc_data_dir=args.bc_data,
+    cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, bc_data_dir=args.bc_data,
                           policies_dir=args.policies, dynamics_dir=args.dynamics_dir)
     group = cfgs[0].group
     members = 2 if methods.get(args.method).data == "raw" else 1

@@ -3,7 +3,7 @@
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import layout, parallel, stage
-from lfdt.jobs.experts import ExpertJob, expert_job
+from lfdt.box_push_jobs.experts import ExpertJob, expert_job
 from lfdt.nets import torch_device
 
 
@@ -14,7 +14,7 @@ def run() -> None:
     args = ap.parse_args()
     p = stage.params(args.params)
     torch_device(p.device)  # before any job starts
-    jobs = [ExpertJob(pr, args.params, args.experts, args.checkpoints, args.reports) for pr in layout.PAIRINGS]
+    jobs = [ExpertJob(pr, p, args.experts, args.checkpoints, args.reports) for pr in layout.PAIRINGS]
     results = parallel.run_jobs(expert_job, jobs, p.grid.workers,
                                 total=p.experts.total_timesteps * len(layout.PAIRINGS), desc="SAC experts",
                                 unit="step")

@@ -3,10 +3,11 @@ demonstrations. The seeds train as stacked models, split into ``grid.workers`` g
 
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
-from lfdt import methods, parallel, stage, translation
-from lfdt.jobs import common
-from lfdt.jobs.translator import translator_job
+from lfdt import methods, parallel, stage
+from lfdt.box_push_jobs import common
+from lfdt.box_push_jobs.translator import translator_job
 from lfdt.nets import torch_device
+from lfdt.translation.model import method_config
 
 
 def run() -> None:
@@ -16,15 +17,15 @@ def run() -> None:
         "bc-data": "where the translated demonstrations go, a folder per configuration",
         "reports": "where the report <method>-d<demos>.json and its learning curve go"})
     torch_device(p.device)  # before any job starts
-    cfgs = common.configs(args.method, args.demos, p.grid.seeds, args.params, demos_dir=args.demos_dir,
+    cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, demos_dir=args.demos_dir,
                           random_dir=args.random_dir, dynamics_dir=args.dynamics_dir,
                           translators_dir=args.translators, bc_data_dir=args.bc_data)
     group = cfgs[0].group
-    tcfg = translation.method_config(args.method, p.translator)
+    tcfg = method_config(args.method, p.translator)
     with stage.frame(args.reports / f"{group}.json") as f:
         results = common.flatten(parallel.run_jobs(
             translator_job, common.groups(cfgs, p.grid.workers), p.grid.workers,
-            total=tcfg.iterations * tcfg.restarts * len(cfgs), desc=f"translator {group}", unit="seed-it"))
+            total=tcfg.steps * len(cfgs), desc=f"translator {group}", unit="seed-it"))
         f.report.update(stage.group_report(results))
         # held-out losses are measured every select_every iterations, diagnostics every log_every
         stage.write_csv(args.reports / f"{group}_curve.csv", [c for r in results for c in r["curve"]])

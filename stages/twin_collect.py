@@ -18,7 +18,7 @@ def run() -> None:
                      tags={"task": task, "seeds": ",".join(map(str, p.seeds)), "backend": p.backend},
                      run_name=f"{task} twin_collect") as f:
         shutil.rmtree(args.data_dir / task, ignore_errors=True)
-        jobs = [SeedJob(task, seed, str(args.params), data_root=str(args.data_dir)) for seed in p.seeds]
+        jobs = [SeedJob(task, seed, p, all_params.device, data_root=str(args.data_dir)) for seed in p.seeds]
         per_seed = parallel.run_jobs(twin_collect.twin_collect_job, jobs, all_params.grid.workers, total=len(jobs),
                                      desc=f"twin_collect {task}", unit="seed")
         stats = {f"s{j.seed}": s for j, s in zip(jobs, per_seed, strict=True)}

@@ -39,7 +39,7 @@ def run() -> None:
         if p.backend == "real":
             rows = real_trials(task, p.real_dir, p.seeds[0])
         else:
-            jobs = [SeedJob(task, seed, str(args.params), models_dir=str(args.models / task / f"s{seed}"),
+            jobs = [SeedJob(task, seed, p, all_params.device, models_dir=str(args.models / task / f"s{seed}"),
                                           video_dir=str(video_root) if seed == p.seeds[0] else None)
                     for seed in p.seeds]
             rows = [r for per in parallel.run_jobs(twin_evaluate.twin_evaluate_job, jobs, all_params.grid.workers,

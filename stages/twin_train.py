@@ -22,13 +22,13 @@ def run() -> None:
         if unknown:
             raise StageError(f"params.yaml twin.{key}: unknown task(s) {unknown}; the tasks are "
                              f"{list(registry.PLANAR)}")
-    jobs = [SeedJob(task, seed, str(args.params), data_root=str(args.data_dir),
+    jobs = [SeedJob(task, seed, p, all_params.device, data_root=str(args.data_dir),
                                   models_dir=str(args.models / task / f"s{seed}")) for seed in p.seeds]
     tcfg = p.translator_for(task)
     # one MLflow run per seed, as the matrix stages' jobs: the stage's frame opens none
     with stage.frame(args.reports / f"{task}_train.json") as f:
         results = parallel.run_jobs(twin_train.twin_train_job, jobs, all_params.grid.workers,
-                                    total=tcfg.iterations * tcfg.restarts * len(jobs), desc=f"twin_train {task}")
+                                    total=tcfg.steps * len(jobs), desc=f"twin_train {task}")
         per_seed = {str(j.seed): r for j, r in zip(jobs, results, strict=True)}
         f.report.update({"task": task, "seeds": per_seed})
     for seed, res in per_seed.items():

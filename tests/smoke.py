@@ -105,6 +105,7 @@ def make_project(dst: Path, commit: bool = False, overrides: dict | None = None)
     subprocess.run(["git", "init", "-q"], cwd=dst, check=True)
     dvc(["init", "-q"], dst)
     dvc(["config", "core.analytics", "false"], dst)
+    shutil.copy2(ROOT / ".dvcignore", dst / ".dvcignore")  # after `dvc init`, which writes its own
     if commit:
         subprocess.run(["git", "add", "-A"], cwd=dst, check=True)
         subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "smoke"], cwd=dst,

@@ -50,9 +50,9 @@ def test_members_of_other_columns_do_not_stack():
 def test_recovery_copies_are_perturbed_states_labelled_back_onto_the_demonstration():
     from lfdt import layout
     from lfdt.dynamics import DynamicsModels
-    from lfdt.tasks.box_push import layout as box_layout
+    from lfdt.tasks.box_push import columns as box_columns
 
-    tl = box_layout.BOX_PUSH
+    tl = box_columns.BOX_PUSH
     s_cols, a_cols = tl.state_columns("Y"), tl.action_columns("Y")
     rng = np.random.default_rng(0)
     n = 40

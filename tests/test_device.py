@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 import torch
 
-from lfdt import bc, layout, translation
+from lfdt import bc, layout
 from lfdt.config import (
     BCConfig,
     DynamicsConfig,
@@ -25,7 +25,9 @@ from lfdt.config import (
 from lfdt.dynamics import RandomY, fit_dynamics
 from lfdt.errors import DeviceError
 from lfdt.nets import torch_device
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
+from lfdt.translation.training import train_translator
+from lfdt.translation.transitions import load_x_transitions, split_held_out
 
 ROOT = Path(__file__).resolve().parents[1]
 cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
@@ -86,7 +88,7 @@ def _random_y(n: int = 2_000, seed: int = 0) -> RandomY:
     a = rng.uniform(-1, 1, size=(n, 6)).astype(np.float32)
     y2 = (y + 0.05 * np.tanh(a @ rng.normal(size=(6, 19)))).astype(np.float32)
     return RandomY(y=y, a=a, y2=y2, episode=np.repeat(np.arange(n // 20), 20),
-                   state_columns=box_layout.state_columns("Y"), action_columns=box_layout.action_columns("Y"))
+                   state_columns=box_columns.state_columns("Y"), action_columns=box_columns.action_columns("Y"))
 
 
 def _on_cpu(module: torch.nn.Module) -> bool:
@@ -123,14 +125,14 @@ def test_translator_trains_on_cuda_and_comes_back_on_the_cpu(tmp_path):
         table, _ = collect_random(dom, EnvConfig(), RandomConfig(transitions=1_000, episodes_per_batch=20))
         paths[dom] = data.write_table(table, tmp_path / f"{dom}.parquet")
     dyn = DynamicsModels(19, 6, [32, 32])
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=box_layout.BOX_PUSH)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=box_columns.BOX_PUSH)
                 for p in layout.PAIRINGS}
-    train, held = translation.split_held_out(random_x, 0.25, seed=0)
+    train, held = split_held_out(random_x, 0.25, seed=0)
     cfg = TranslatorConfig(iterations=100, hidden=[32, 32], log_every=50, select_every=50, batch_size=32,
                            kinematics="learned", history_size=64)
     y = np.random.default_rng(0).normal(size=(500, 19)).astype(np.float32)
-    tr, stats = translation.train_translator(train, random_x, y, dyn, cfg, seed=0, held_out=held, device="cuda",
-                                             tl=box_layout.BOX_PUSH)
+    tr, stats = train_translator(train, random_x, y, dyn, cfg, seed=0, held_out=held, device="cuda",
+                                 tl=box_columns.BOX_PUSH)
     assert _on_cpu(tr) and _on_cpu(dyn) and np.isfinite(stats["selected_heldout_loss"])
 
 

@@ -120,9 +120,19 @@ def missing_deps(cmd: str, deps: list[str], item: dict) -> list[str]:
     return sorted(f.relative_to(ROOT).as_posix() for f in required(cmd, item) if not covered(f, deps) and not inert(f))
 
 
+def package_code(folder: Path) -> set[str]:
+    """Every file of a package folder (subpackages included) that can change what a stage computes, relative to the
+    project's root."""
+    return {f.relative_to(ROOT).as_posix() for f in folder.rglob("*.py") if "__pycache__" not in f.parts
+            and not inert(f)}
+
+
 def extra_deps(cmd: str, deps: list[str], item: dict) -> list[str]:
+    """Code deps the stage does not run: a file it does not import, or a package folder one of whose files it does not
+    import (a folder dep stands for all of its code)."""
     imported = {f.relative_to(ROOT).as_posix() for f in required(cmd, item)}
-    return [d for d in deps if d.endswith(".py") and d not in imported]
+    return [d for d in deps if (d.endswith(".py") and d not in imported)
+            or (d.startswith(PACKAGE + "/") and not d.endswith(".py") and not package_code(ROOT / d) <= imported)]
 
 
 def _lookup(doc: dict, dotted: str):
@@ -180,10 +190,11 @@ def test_stage_deps_list_no_code_the_stage_does_not_import(name, cmd, deps, item
 
 
 def test_closure_follows_imports_transitively():
-    # stages/train_translator.py imports lfdt.jobs.translator, which imports lfdt.translation, lfdt.dynamics and
-    # lfdt.tasks.box_push.env
+    # stages/train_translator.py imports lfdt.box_push_jobs.translator, which imports lfdt.translation.training (which
+    # imports lfdt.translation.losses), lfdt.dynamics and lfdt.tasks.box_push.env
     files = {f.relative_to(ROOT).as_posix() for f in closure(ROOT / "stages/train_translator.py")}
-    assert {"lfdt/translation.py", "lfdt/dynamics.py", "lfdt/tasks/box_push/env.py", "lfdt/config.py"} <= files
+    assert {"lfdt/translation/training.py", "lfdt/translation/losses.py", "lfdt/dynamics.py",
+            "lfdt/tasks/box_push/env.py", "lfdt/config.py"} <= files
 
 
 def test_a_policy_models_code_file_is_a_dep_of_the_stage_that_logs_it():

@@ -9,7 +9,7 @@ from lfdt.config import DynamicsConfig, EnvConfig, RandomConfig
 from lfdt.dynamics import DynamicsModels, RandomY, fit_dynamics, load_models, load_random_y, split_episodes
 from lfdt.errors import StageError
 from lfdt.nets import load_state, save_state
-from lfdt.tasks.box_push.layout import BOX_PUSH
+from lfdt.tasks.box_push.columns import BOX_PUSH
 from lfdt.tasks.box_push.random_motion import collect_random
 
 

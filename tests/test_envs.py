@@ -7,7 +7,7 @@ import pytest
 
 from lfdt import layout
 from lfdt.config import EnvConfig
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import ENV_IDS, BoxPushEnv, BoxPushModel, forward_kinematics, inverse_kinematics
 from lfdt.tasks.box_push.scripted import ScriptedPush, run_scripted
 
@@ -26,11 +26,11 @@ def domain(request):
 def test_registered_and_layout(domain):
     env = gym.make(ENV_IDS[domain])
     obs, info = env.reset(seed=3)
-    assert obs.shape == (len(box_layout.state_columns(domain)),)
-    assert env.action_space.shape == (len(box_layout.action_columns(domain)),)
+    assert obs.shape == (len(box_columns.state_columns(domain)),)
+    assert env.action_space.shape == (len(box_columns.action_columns(domain)),)
     assert {"is_success", "box_distance", "box_yaw", "box_speed"} <= set(info)
     # the observation's named columns are what they say they are
-    cols = box_layout.state_columns(domain)
+    cols = box_columns.state_columns(domain)
     unwrapped = env.unwrapped
     assert obs[cols.index("box.x")] == pytest.approx(unwrapped.data.qpos[unwrapped.scene.box_qpos][0])
     assert obs[cols.index("box.yaw")] == pytest.approx(unwrapped.data.qpos[unwrapped.scene.box_qpos][2])

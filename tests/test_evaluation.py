@@ -81,11 +81,11 @@ def test_a_seed_is_evaluated_the_same_alone_and_in_its_group():
     import pandas as pd
 
     from lfdt import bc, layout
+    from lfdt.box_push_jobs.evaluate import box_push_trials
     from lfdt.config import BCConfig, EnvConfig
-    from lfdt.jobs.evaluate import box_push_trials
-    from lfdt.tasks.box_push import layout as box_layout
+    from lfdt.tasks.box_push import columns as box_columns
 
-    tl = box_layout.BOX_PUSH
+    tl = box_columns.BOX_PUSH
     cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
     rng = np.random.default_rng(0)
     tasks = []

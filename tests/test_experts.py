@@ -15,8 +15,8 @@ import yaml
 
 from lfdt import data
 from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push import experts
-from lfdt.tasks.box_push import layout as box_layout
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ExpertsConfig(total_timesteps=1_200, n_envs=2, net_arch=[32, 32], batch_size=32, buffer_size=5_000,
@@ -37,7 +37,7 @@ def test_train_save_load_and_demos(tmp_path, protocol):
     assert model.action_space.shape == ((4,) if protocol == "programmed_robot" else (7,))
     experts.save_expert(model, tmp_path / "expert", "R1H", env_cfg, TINY, demos_cfg, {"note": "tiny"})
     loaded, cfg = experts.load_expert(tmp_path / "expert")
-    assert cfg["observation_columns"] == box_layout.state_columns("R1H") and cfg["note"] == "tiny"
+    assert cfg["observation_columns"] == box_columns.state_columns("R1H") and cfg["note"] == "tiny"
     assert cfg["protocol"] == protocol
     obs = np.zeros(21)
     np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
@@ -45,7 +45,7 @@ def test_train_save_load_and_demos(tmp_path, protocol):
     assert ev["episodes"] == 3 and 0.0 <= ev["success_rate"] <= 1.0
     table, st = experts.collect_demos(loaded, "R1H", env_cfg, demos_cfg)
     path = data.write_table(table, tmp_path / "R1H.parquet")
-    meta = data.check_transitions(path, "demos", "R1H", box_layout.BOX_PUSH)
+    meta = data.check_transitions(path, "demos", "R1H", box_columns.BOX_PUSH)
     assert meta["robot"] == "r1" and meta["protocol"] == protocol
     assert st["demonstrations"] == 2 and st["attempts"] == 2
     df = data.read_transitions(path)

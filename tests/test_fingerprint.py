@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from lfdt import fingerprint, numerics
+from lfdt import numerics
+from lfdt.box_push_jobs import fingerprint
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -18,7 +18,7 @@ import smoke
 import yaml
 
 from lfdt import data, layout, methods, stage
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 
 # with `pytest -n` (make test) these tests run on one worker, one after the other (later ones change the project);
 # the sweep's group runs on the other worker meanwhile
@@ -53,11 +53,11 @@ def test_every_stage_ran(project):
 def test_artifact_schemas(project):
     dst, _ = project
     for domain in layout.DOMAINS:
-        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain, box_layout.BOX_PUSH)
+        meta = data.check_transitions(dst / f"data/random/{domain}.parquet", "random", domain, box_columns.BOX_PUSH)
         assert data.read_transitions(dst / f"data/random/{domain}.parquet").shape[0] == 3000
         assert meta["random"]["transitions"] == 3000
     for pairing in layout.PAIRINGS:
-        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing, box_layout.BOX_PUSH)
+        data.check_transitions(dst / f"data/demos/{pairing}.parquet", "demos", pairing, box_columns.BOX_PUSH)
         df = data.read_transitions(dst / f"data/demos/{pairing}.parquet")
         assert df.episode_index.nunique() == 4
         cfg = json.loads((dst / f"models/experts/{pairing}/config.json").read_text())
@@ -101,8 +101,8 @@ def test_second_half_artifacts(project):
             assert meta["seed"] == seed
             df = data.read_transitions(path)
             assert df.episode_index.nunique() == 6 and set(df.source_pairing) == set(layout.PAIRINGS)
-            want = [layout.STATE_PREFIX + c for c in box_layout.state_columns("Y")]
-            want += [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")]
+            want = [layout.STATE_PREFIX + c for c in box_columns.state_columns("Y")]
+            want += [layout.ACTION_PREFIX + c for c in box_columns.action_columns("Y")]
             assert set(want) <= set(df.columns) and df[want].notna().all().all()
             d = tr["seeds"][str(seed)]
             assert d["replay_box_position_error_m"] >= 0 and 0 <= d["final/D/accuracy"] <= 1
@@ -336,10 +336,10 @@ def test_every_policy_is_a_registered_mlflow_model(project, tmp_path):
 
 
 def test_an_edit_of_the_gan_reruns_training_never_data_collection(project):
-    """lfdt/translation.py is the translator's code: the stages that train or apply translators go stale, the twin's
-    data collection and the demonstrations do not."""
+    """lfdt/translation/training.py is the translator's training code: the stages that train translators go stale, the
+    twin's data collection and the demonstrations do not."""
     dst, _ = project
-    gan = dst / "lfdt/translation.py"
+    gan = dst / "lfdt/translation/training.py"
     original = gan.read_bytes()
     try:
         gan.write_bytes(original + b"\n# an edit\n")

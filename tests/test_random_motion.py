@@ -6,7 +6,7 @@ import pytest
 
 from lfdt import data, layout
 from lfdt.config import EnvConfig, RandomConfig
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import BoxPushEnv
 from lfdt.tasks.box_push.random_motion import collect_random, random_commands, rollout_episodes
 
@@ -38,13 +38,13 @@ def test_collect_random_table(tmp_path):
     table, stats = collect_random("HR2", CFG, cfg)
     assert table.num_rows == 1_050 and stats["episodes"] == 11
     path = data.write_table(table, tmp_path / "HR2.parquet")
-    meta = data.check_transitions(path, "random", "HR2", box_layout.BOX_PUSH)
+    meta = data.check_transitions(path, "random", "HR2", box_columns.BOX_PUSH)
     assert meta["seed"] == 0 and meta["env"]["frame_skip"] == CFG.frame_skip
-    assert meta["layout"]["domains"]["HR2"]["state"] == box_layout.state_columns("HR2")
+    assert meta["layout"]["domains"]["HR2"]["state"] == box_columns.state_columns("HR2")
     df = data.read_transitions(path)
     # consecutive rows of an episode chain: next_state(t) == state(t+1)
-    s = df[[layout.STATE_PREFIX + c for c in box_layout.state_columns("HR2")]].to_numpy()
-    ns = df[[layout.NEXT_STATE_PREFIX + c for c in box_layout.state_columns("HR2")]].to_numpy()
+    s = df[[layout.STATE_PREFIX + c for c in box_columns.state_columns("HR2")]].to_numpy()
+    ns = df[[layout.NEXT_STATE_PREFIX + c for c in box_columns.state_columns("HR2")]].to_numpy()
     same_ep = df.episode_index.to_numpy()[1:] == df.episode_index.to_numpy()[:-1]
     np.testing.assert_allclose(ns[:-1][same_ep], s[1:][same_ep])
     assert df.frame_index.max() == 99 and df.timestamp.iloc[1] == pytest.approx(CFG.timestep * CFG.frame_skip)
@@ -62,17 +62,17 @@ def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
     cfg = RandomConfig(transitions=200, episode_steps=100, episodes_per_batch=2, threads=1)
     table, _ = collect_random("R1H", CFG, cfg)
     path = data.write_table(table, tmp_path / "R1H.parquet")
-    from lfdt import translation
+    from lfdt.translation.transitions import load_x_transitions
 
     # a random-motion file handed over as demonstrations is refused before anything trains on it
     with pytest.raises(data.DataFileError, match=r"R1H.parquet holds random data of domain R1H \(kind 'random' "
                                                  r"where 'demos' is needed\)"):
-        translation.load_x_transitions(path, "R1H", kind="demos", tl=box_layout.BOX_PUSH)
+        load_x_transitions(path, "R1H", kind="demos", tl=box_columns.BOX_PUSH)
     with pytest.raises(data.DataFileError, match=r"domain 'R1H' where 'HR2' is needed"):
         data.read_transitions(path, kind="random", domain="HR2")
     with pytest.raises(data.DataFileError, match=r"task 'box_push' where 'block_push' is needed"):
         data.read_transitions(path, task="block_push")
-    assert len(translation.load_x_transitions(path, "R1H", kind="random", tl=box_layout.BOX_PUSH).x) == 200
+    assert len(load_x_transitions(path, "R1H", kind="random", tl=box_columns.BOX_PUSH).x) == 200
     # corrupted bytes: the error names the file
     bad = tmp_path / "bad.parquet"
     raw = path.read_bytes()

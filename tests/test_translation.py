@@ -5,36 +5,42 @@ import numpy as np
 import pytest
 import torch
 
-from lfdt import data, layout, translation
+from lfdt import data, layout
+from lfdt.box_push_jobs.translator import box_push_kinematics
 from lfdt.config import EnvConfig, RandomConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.jobs.translator import box_push_kinematics
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import replay_check
 from lfdt.tasks.box_push.random_motion import collect_random
+from lfdt.translation.apply import translator_diagnostics
+from lfdt.translation.losses import Losses, normalised
+from lfdt.translation.model import MeanTranslator, Translator, fit_x_normalizers, method_config
+from lfdt.translation.restarts import RESTART_SEED_STRIDE, train_restarts
+from lfdt.translation.training import Member, lr_factor, train_translator, train_translators
+from lfdt.translation.transitions import canonical_x_columns, load_x_transitions, split_held_out
 
-TL = box_layout.BOX_PUSH
+TL = box_columns.BOX_PUSH
 """The task these tests translate: the simulated box push."""
 
 
 def test_methods_are_weights_at_zero():
     base = TranslatorConfig(lambda_dyn=7.0, lambda_id=3.0)
-    assert translation.method_config("lfdt", base) == base
-    assert translation.method_config("lfdt_no_dyn", base).lambda_dyn == 0 and \
-        translation.method_config("lfdt_no_dyn", base).lambda_id == 3.0
-    assert translation.method_config("lfdt_no_id", base).lambda_id == 0
+    assert method_config("lfdt", base) == base
+    assert method_config("lfdt_no_dyn", base).lambda_dyn == 0 and \
+        method_config("lfdt_no_dyn", base).lambda_id == 3.0
+    assert method_config("lfdt_no_id", base).lambda_id == 0
     with pytest.raises(ValueError, match="unknown method 'lfdt_magic'"):
-        translation.method_config("lfdt_magic", base)
+        method_config("lfdt_magic", base)
     with pytest.raises(ValueError, match="trains no translator"):
-        translation.method_config("bc_no_translation", base)
+        method_config("bc_no_translation", base)
 
 
 def test_canonical_columns_and_robot_slot():
     for p in layout.PAIRINGS:
-        cols = translation.canonical_x_columns(p, TL)
-        assert cols[:8] == box_layout.arm_columns(layout.robot_arm(p)) and cols[8:18] == box_layout.arm_columns("h")
-        y = box_layout.state_columns("Y")
-        assert y[TL.robot_y_slice(p)] == box_layout.arm_columns(layout.robot_arm(p))
+        cols = canonical_x_columns(p, TL)
+        assert cols[:8] == box_columns.arm_columns(layout.robot_arm(p)) and cols[8:18] == box_columns.arm_columns("h")
+        y = box_columns.state_columns("Y")
+        assert y[TL.robot_y_slice(p)] == box_columns.arm_columns(layout.robot_arm(p))
 
 
 @pytest.fixture(scope="module")
@@ -47,23 +53,23 @@ def tiny(tmp_path_factory):
         paths[d] = data.write_table(table, root / f"{d}.parquet")
     dyn = DynamicsModels(19, 6, [32, 32])
     y = data.read_transitions(paths["Y"])
-    dyn.y_norm.mean.copy_(torch.tensor(y[[f"state.{c}" for c in box_layout.state_columns("Y")]].mean().to_numpy()))
-    dyn.y_norm.std.copy_(torch.tensor(y[[f"state.{c}" for c in box_layout.state_columns("Y")]].std().to_numpy()))
+    dyn.y_norm.mean.copy_(torch.tensor(y[[f"state.{c}" for c in box_columns.state_columns("Y")]].mean().to_numpy()))
+    dyn.y_norm.std.copy_(torch.tensor(y[[f"state.{c}" for c in box_columns.state_columns("Y")]].std().to_numpy()))
     return env, paths, dyn
 
 
 def test_skips_put_hand_and_object_where_they_belong(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    tr = translation.Translator([16], TL)
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True, tl=TL)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    tr = Translator([16], TL)
+    fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="correct", hand_skip=True, tl=TL)
     torch.nn.init.zeros_(tr.G.layers[-1].weight)
     torch.nn.init.zeros_(tr.G.layers[-1].bias)  # G's own output is 0: only the skips remain
-    y_cols = box_layout.state_columns("Y")
+    y_cols = box_columns.state_columns("Y")
     for p in layout.PAIRINGS:
         x = random_x[p].x[:5]
         y = dyn.y_norm.inverse(tr.translate(x, p)).numpy()
-        cols = translation.canonical_x_columns(p, TL)
+        cols = canonical_x_columns(p, TL)
         missing = "r2" if layout.robot_arm(p) == "r1" else "r1"
         np.testing.assert_allclose(y[:, y_cols.index(f"{missing}.ee_x")], x[:, cols.index("h.ee_x")], atol=1e-5)
         np.testing.assert_allclose(y[:, y_cols.index("box.yaw")], x[:, cols.index("box.yaw")], atol=1e-5)
@@ -74,11 +80,10 @@ def test_skips_put_hand_and_object_where_they_belong(tiny):
 
 def test_identity_loss_pulls_the_real_robot_only(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            log_every=100, batch_size=32, kinematics="learned")
-    tr, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
-                                             tl=TL)
+    tr, stats = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
     assert [c["iteration"] for c in stats["curve"]] == [100, 200, 300]
     assert stats["curve"][-1]["loss/id"] < 0.5 * stats["curve"][0]["loss/id"]
     assert stats["curve"][-1]["loss/dyn"] > 0 and stats["curve"][-1]["loss/adv"] > 0  # measured, not trained
@@ -93,7 +98,7 @@ def test_replay_of_true_transitions_is_consistent(tiny):
     assert res["replayed_demos"] == 3
     assert res["replay_box_position_error_m"] < 1e-6 and res["replay_box_yaw_error_rad"] < 1e-6
     shuffled = df.copy()
-    acts = [f"action.{c}" for c in box_layout.action_columns("Y")]
+    acts = [f"action.{c}" for c in box_columns.action_columns("Y")]
     shuffled[acts] = -shuffled[acts].to_numpy()
     assert replay_check(shuffled, env)["replay_box_position_error_m"] > 1e-4
 
@@ -103,12 +108,12 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
     change of its joint angles per control step (zero at the start, where the arms are at rest)."""
     env, paths, dyn = tiny
     kin = box_push_kinematics(env)
-    tr = translation.Translator([16], TL, kinematics=kin)
+    tr = Translator([16], TL, kinematics=kin)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
-    y_cols = box_layout.state_columns("Y")
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
+    y_cols = box_columns.state_columns("Y")
     from lfdt.tasks.box_push.env import arm_specs, forward_kinematics
 
     for p in layout.PAIRINGS:
@@ -126,16 +131,16 @@ def test_forward_kinematics_makes_ends_and_velocities_consistent(tiny):
 
 def test_held_out_split_and_checkpoint_selection(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    train, held = translation.split_held_out(random_x, 0.25, seed=0)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    train, held = split_held_out(random_x, 0.25, seed=0)
     for p in layout.PAIRINGS:
         assert not set(train[p].episode) & set(held[p].episode)
         assert len(train[p].x) + len(held[p].x) == len(random_x[p].x) and len(held[p].x) > 0
-    assert translation.split_held_out(random_x, 0.0, seed=0)[1] is None
+    assert split_held_out(random_x, 0.0, seed=0)[1] is None
     cfg = TranslatorConfig(iterations=200, hidden=[32, 32], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            log_every=50, select_every=50, batch_size=32, kinematics="learned")
-    tr, stats = translation.train_translator(train, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
-                                             held_out=held, tl=TL)
+    tr, stats = train_translator(train, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
+                                 held_out=held, tl=TL)
     losses = [c["heldout/selection_loss"] for c in stats["curve"] if "heldout/selection_loss" in c]
     assert len(losses) == 4 and stats["selected_heldout_loss"] == pytest.approx(min(losses))
     assert stats["selected_iteration"] == 50 * (1 + int(np.argmin(losses)))
@@ -143,31 +148,31 @@ def test_held_out_split_and_checkpoint_selection(tiny):
 
 def test_hand_loss_pulls_the_missing_robot_to_the_hand(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
                            lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
-    _, stats = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
+    _, stats = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
     assert stats["curve"][-1]["loss/hand"] < 0.5 * stats["curve"][0]["loss/hand"]
 
 
 def test_object_weight_scales_the_object_part_of_l_dyn(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    tr = translation.Translator([16], TL)
-    translation.fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
-    x0, x, x2, pidx = translation._normalised(tr, random_x)
-    full = translation._Losses(tr, dyn, TranslatorConfig(), TL)(x0, x, x2, pidx)
-    none = translation._Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), TL)(x0, x, x2, pidx)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    tr = Translator([16], TL)
+    fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
+    x0, x, x2, pidx = normalised(tr, random_x)
+    full = Losses(tr, dyn, TranslatorConfig(), TL)(x0, x, x2, pidx)
+    none = Losses(tr, dyn, TranslatorConfig(dyn_object_weight=0.0), TL)(x0, x, x2, pidx)
     obj = full["dyn_sq"][0, :, -3:].sum(dim=1).mean() / full["dyn_sq"].shape[-1]
     assert float(none["dyn"].detach()) == pytest.approx(float((full["dyn"] - obj).detach()), rel=1e-4)
 
 
 def test_forward_kinematics_needs_a_robot_model(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     with pytest.raises(ValueError, match="needs the arms' kinematics"):
-        translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
-                                     TranslatorConfig(iterations=2), seed=0, tl=TL)
+        train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
+                         TranslatorConfig(iterations=2), seed=0, tl=TL)
 
 
 def test_training_and_diagnostics_raise_no_warnings(tiny):
@@ -175,18 +180,18 @@ def test_training_and_diagnostics_raise_no_warnings(tiny):
     import warnings
 
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", with_actions=True, tl=TL)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", with_actions=True, tl=TL)
                 for p in layout.PAIRINGS}
     kin = box_push_kinematics(env)
     cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16)
     # a writable copy, as load_random_y gives the stage
-    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_layout.state_columns("Y")]]
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_columns.state_columns("Y")]]
     y = y.to_numpy(np.float32).copy()
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
-        tr, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin, tl=TL)
+        tr, _ = train_translator(random_x, random_x, y, dyn, cfg, seed=0, kinematics=kin, tl=TL)
         with torch.no_grad():
-            diag = translation.translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin, tl=TL)
+            diag = translator_diagnostics(tr, dyn, cfg, random_x, random_x, y, kinematics=kin, tl=TL)
     assert np.isfinite(diag["labels/real_robot_rmse"])
 
 
@@ -194,25 +199,24 @@ def test_restarts_translate_with_the_mean_of_their_outputs(tiny):
     """restarts = 1 is the single translator unchanged; restarts = 2 trains a second one from seed + 1000 and
     translates with the mean of both normalised outputs; restart r logs under restart<r>/."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=30, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
-    single, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3, tl=TL)
+    single, _ = train_translator(random_x, random_x, y, dyn, cfg, seed=3, tl=TL)
     logged = []
-    trs, stats = translation.train_restarts(random_x, random_x, y, dyn, cfg.model_copy(update={"restarts": 2}), 3,
-                                            log=lambda m, i: logged.append(set(m)), tl=TL)
-    other, _ = translation.train_translator(random_x, random_x, y, dyn, cfg, seed=3 + translation.RESTART_SEED_STRIDE,
-                                            tl=TL)
+    trs, stats = train_restarts(random_x, random_x, y, dyn, cfg.model_copy(update={"restarts": 2}), 3,
+                                log=lambda m, i: logged.append(set(m)), tl=TL)
+    other, _ = train_translator(random_x, random_x, y, dyn, cfg, seed=3 + RESTART_SEED_STRIDE, tl=TL)
     x = random_x["R1H"].x[:12]
     for a, b in zip(single.state_dict().values(), trs[0].state_dict().values()):
         assert torch.equal(a, b)
     for a, b in zip(other.state_dict().values(), trs[1].state_dict().values()):
         assert torch.equal(a, b)
     assert not torch.equal(trs[0].translate(x, "R1H"), trs[1].translate(x, "R1H"))
-    torch.testing.assert_close(translation.MeanTranslator(trs).translate(x, "R1H"),
+    torch.testing.assert_close(MeanTranslator(trs).translate(x, "R1H"),
                                (single.translate(x, "R1H") + other.translate(x, "R1H")) / 2)
-    assert torch.equal(translation.MeanTranslator(trs[:1]).translate(x, "R1H"), single.translate(x, "R1H"))
+    assert torch.equal(MeanTranslator(trs[:1]).translate(x, "R1H"), single.translate(x, "R1H"))
     assert len(stats) == 2 and any(all(k.startswith("restart1/") for k in m) for m in logged)
     assert any(not any(k.startswith("restart") for k in m) for m in logged)
 
@@ -221,14 +225,14 @@ def test_discriminator_can_see_the_robots_only(tiny):
     """disc_input 'robots': D's input is the robots' columns, so the (copied) object cannot tell it anything; 'state'
     (the paper) sees every column."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=20, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
     n_obj = len(TL.object_cols)
     for disc_input, n_in in (("state", 19), ("robots", 19 - n_obj)):
-        tr, _ = translation.train_translator(random_x, random_x, y, dyn,
-                                             cfg.model_copy(update={"disc_input": disc_input}), seed=0, tl=TL)
+        tr, _ = train_translator(random_x, random_x, y, dyn,
+                                 cfg.model_copy(update={"disc_input": disc_input}), seed=0, tl=TL)
         assert tr.D.layers[0].weight.shape[1] == n_in
         yb = torch.randn(1, 5, 19)
         moved = yb.clone()
@@ -241,11 +245,11 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
     """adv_on 'random': D and L_adv see only the translated X random motion (the batch's second half); 'all' (the
     paper) the whole batch."""
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = np.zeros((10, 19), np.float32)
     cfg = TranslatorConfig(iterations=3, hidden=[16], log_every=10, select_every=10, batch_size=16,
                            kinematics="learned")
-    orig = translation.Translator.disc
+    orig = Translator.disc
     for adv_on, fakes in (("all", 16), ("random", 8)):
         sizes: list[int] = []
 
@@ -253,32 +257,30 @@ def test_adversarial_loss_can_skip_the_demonstrations(tiny, monkeypatch):
             sizes.append(yb.shape[1])
             return orig(self, yb)
 
-        monkeypatch.setattr(translation.Translator, "disc", counting_disc)
-        translation.train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0,
-                                     tl=TL)
-        monkeypatch.setattr(translation.Translator, "disc", orig)
+        monkeypatch.setattr(Translator, "disc", counting_disc)
+        train_translator(random_x, random_x, y, dyn, cfg.model_copy(update={"adv_on": adv_on}), seed=0, tl=TL)
+        monkeypatch.setattr(Translator, "disc", orig)
         # per iteration: D on real + fakes, then L_adv on the fakes
         assert sizes[:2] == [2 * fakes, fakes]
 
 
 def test_hand_offset_is_learnt_with_g_and_only_when_asked_for(tiny):
     env, paths, dyn = tiny
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     cfg = TranslatorConfig(iterations=200, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=1.0,
                            lambda_hand=1.0, log_every=100, batch_size=32, kinematics="learned")
-    plain, _ = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0,
-                                            tl=TL)
+    plain, _ = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
     assert "hand_shift" not in plain.state_dict() and plain.hand_offset_m(TL) == {}
-    tr, _ = translation.train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
-                                         cfg.model_copy(update={"hand_offset": True}), seed=0, tl=TL)
+    tr, _ = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn,
+                             cfg.model_copy(update={"hand_offset": True}), seed=0, tl=TL)
     assert "hand_shift" in tr.state_dict() and any(p is tr.hand_shift for p in tr.generator_parameters())
     assert float(tr.hand_shift.detach().abs().max()) > 0  # trained with G
     offsets = tr.hand_offset_m(TL)
     missing_ends = [c for p in layout.PAIRINGS for c in TL.position_cols["r2" if layout.robot_arm(p) == "r1" else "r1"]]
     assert sorted(offsets) == sorted(missing_ends)
     # the loss compares with the hand plus the offset: the mean difference in a batch lowers it
-    losses = translation._Losses(tr, dyn, cfg, TL)
-    batch = translation._normalised(tr, random_x)
+    losses = Losses(tr, dyn, cfg, TL)
+    batch = normalised(tr, random_x)
     with torch.no_grad():
         tr.hand_shift.zero_()
         out = losses(*batch)
@@ -295,8 +297,8 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
     the same bits as when that seed trains alone (its own demonstrations and held-out split, its own draws)."""
     env, paths, dyn = tiny
     kin = box_push_kinematics(env)
-    random_x = {p: translation.load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_layout.state_columns("Y")]]
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_columns.state_columns("Y")]]
     y = y.to_numpy(np.float32).copy()
     cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=10, select_every=10, batch_size=16,
                            hand_offset=True, lambda_hand=1.0)
@@ -305,12 +307,12 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
         eps = {p: np.unique(t.episode) for p, t in random_x.items()}
         pick = {p: t.subset(np.isin(t.episode, np.random.default_rng(seed).choice(eps[p], 6, replace=False)))
                 for p, t in random_x.items()}
-        train, held = translation.split_held_out(pick, 0.3, seed)
-        members.append(translation.Member(train, seed, held))
-    stacked, st_stats = translation.train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
+        train, held = split_held_out(pick, 0.3, seed)
+        members.append(Member(train, seed, held))
+    stacked, st_stats = train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
     for k, m in enumerate(members):
-        alone, stats = translation.train_translator(m.demos, random_x, y, dyn, cfg, m.seed, tl=TL, kinematics=kin,
-                                                    held_out=m.held_out)
+        alone, stats = train_translator(m.demos, random_x, y, dyn, cfg, m.seed, tl=TL, kinematics=kin,
+                                        held_out=m.held_out)
         a, b = alone.state_dict(), stacked[k].state_dict()
         assert sorted(a) == sorted(b)
         assert all(torch.equal(a[key], b[key]) for key in a), f"seed {m.seed}: not the same bits in a stack"
@@ -321,8 +323,8 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
 
 
 def test_learning_rate_decays_as_asked():
-    assert translation.lr_factor("none", 500, 1000) == 1.0
-    assert translation.lr_factor("cosine", 1, 1000) == 1.0 and translation.lr_factor("linear", 1, 1000) == 1.0
-    assert translation.lr_factor("cosine", 501, 1000) == pytest.approx(0.5)
-    assert translation.lr_factor("linear", 1000, 1000) == pytest.approx(0.001)
-    assert translation.lr_factor("cosine", 1000, 1000) < 1e-4
+    assert lr_factor("none", 500, 1000) == 1.0
+    assert lr_factor("cosine", 1, 1000) == 1.0 and lr_factor("linear", 1, 1000) == 1.0
+    assert lr_factor("cosine", 501, 1000) == pytest.approx(0.5)
+    assert lr_factor("linear", 1000, 1000) == pytest.approx(0.001)
+    assert lr_factor("cosine", 1000, 1000) < 1e-4

@@ -1,12 +1,12 @@
 """The numeric fingerprint on other CPUs: this machine's, and CPU models emulated by QEMU's user mode.
 
-Runs ``python -m lfdt.fingerprint`` natively (pinned, and with ``LFDT_NUMERICS=native`` as a negative control, which
-should differ where this CPU has AVX-512) and under ``qemu-x86_64 -cpu <model>`` for each model asked for (QEMU
-7.2's TCG emulates AVX2 and FMA but not AVX-512: each emulated model is a CPU of another vendor or generation
+Runs ``python -m lfdt.box_push_jobs.fingerprint`` natively (pinned, and with ``LFDT_NUMERICS=native`` as a negative
+control, which should differ where this CPU has AVX-512) and under ``qemu-x86_64 -cpu <model>`` for each model asked for
+(QEMU 7.2's TCG emulates AVX2 and FMA but not AVX-512: each emulated model is a CPU of another vendor or generation
 without AVX-512, whose CPUID the libraries read to pick their kernels). Compares every result with the committed
-``reports/fingerprint.json`` and writes ``reports/cross_cpu.json``: the host's CPU model, the date, each run's
-hashes and whether they match. QEMU comes from Debian's ``qemu-user`` package (``apt-get install qemu-user``);
-each emulated run takes one to three minutes.
+``reports/fingerprint.json`` and writes ``reports/cross_cpu.json``: the host's CPU model, the date, each run's hashes
+and whether they match. QEMU comes from Debian's ``qemu-user`` package (``apt-get install qemu-user``); each emulated
+run takes one to three minutes.
 
     python tools/cross_cpu.py --models Haswell EPYC Skylake-Client EPYC-Rome
 """
@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def run_fingerprint(prefix: list[str], env: dict[str, str], timeout: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "fp.json"
-        r = subprocess.run([*prefix, sys.executable, "-m", "lfdt.fingerprint", "--out", str(out)], cwd=ROOT,
-                           env=env, capture_output=True, text=True, timeout=timeout)
+        r = subprocess.run([*prefix, sys.executable, "-m", "lfdt.box_push_jobs.fingerprint", "--out", str(out)],
+                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
         if r.returncode != 0:
             tail = "\n".join(line for line in r.stderr.splitlines() if "TCG doesn't support" not in line)[-2000:]
             raise RuntimeError(f"{' '.join(prefix) or 'native'}: fingerprint failed:\n{tail}")

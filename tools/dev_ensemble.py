@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from lfdt import bc
+from lfdt.box_push_jobs.evaluate import box_push_trials
 from lfdt.config import EnvConfig
-from lfdt.jobs.evaluate import box_push_trials
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 
 sys.path.insert(0, str(Path(__file__).parent))
 from dev_trial import DEV_SEEDS, ROOT, save_outcomes, write_results  # noqa: E402
@@ -56,7 +56,7 @@ def main() -> None:
     if len(args.trials) != len(args.offsets):
         raise SystemExit("--trials and --offsets must pair up")
     t0 = time.perf_counter()
-    tl = box_layout.BOX_PUSH
+    tl = box_columns.BOX_PUSH
     members = [[bc.BCPolicy.load(ROOT / "dev" / t / "policies" / f"{args.method}-d{args.demos}" / f"s{s + o}", tl)[0]
                 for t, o in zip(args.trials, args.offsets)] for s in args.seeds]
     res = box_push_trials(MeanOfPolicies(members), len(args.seeds), EnvConfig(), 200, purpose="development")

@@ -2,7 +2,7 @@
 start states, with params changed as ``dvc exp run -S`` would, outside the DVC pipeline.
 
 For choosing settings without touching the evaluation start states (or the evaluation seeds): it runs the same jobs
-as the translator, select, track, BC and evaluation stages (``lfdt/jobs``), on the workspace's demonstrations,
+as the translator, select, track, BC and evaluation stages (``lfdt/box_push_jobs``), on the workspace's demonstrations,
 random motion and dynamics, writing into ``dev/<name>/`` (git-ignored), logging every job to MLflow (tagged with the
 trial's name), and appends one row per (method, demos) to ``docs/experiments/trials.csv``: the per-seed success
 rates, their mean and 95 % interval over seeds and start states, and the paired difference from BC without
@@ -29,12 +29,12 @@ import pyarrow.parquet as pq
 import yaml
 
 from lfdt import data, evaluation, layout, methods, numerics, parallel, stage
+from lfdt.box_push_jobs import common
+from lfdt.box_push_jobs.bc import bc_job
+from lfdt.box_push_jobs.evaluate import evaluate_job
+from lfdt.box_push_jobs.track import track_job
+from lfdt.box_push_jobs.translator import translator_job
 from lfdt.config import validate_params
-from lfdt.jobs import common
-from lfdt.jobs.bc import bc_job
-from lfdt.jobs.evaluate import evaluate_job
-from lfdt.jobs.track import track_job
-from lfdt.jobs.translator import translator_job
 
 ROOT = Path(__file__).resolve().parents[1]
 DEV_SEEDS = list(range(40, 50))
@@ -107,14 +107,14 @@ def main() -> None:
                     shutil.copytree(group / f"s{s}", group / f"s{s + args.bc_seed_offset}")
     for n in args.demos:
         for tm in translators:
-            cfgs = common.configs(tm, n, args.seeds, str(params_path), **dirs)
+            cfgs = common.configs(tm, n, args.seeds, p, **dirs)
             res = common.flatten(parallel.run_jobs(translator_job, common.groups(cfgs, p.grid.workers),
                                                    p.grid.workers, desc=f"translator {tm}-d{n}", unit="seed-it"))
             for r in res:
                 diag_rows.append({"method": tm, "demos": n, "stage": "translator", **_flat(r["metrics"])})
         for m in wanted:
             bc_seeds = [s + args.bc_seed_offset for s in args.seeds]
-            cfgs = common.configs(m.name, n, bc_seeds, str(params_path), **dirs)
+            cfgs = common.configs(m.name, n, bc_seeds, p, **dirs)
             if m.data == "raw" and args.bc_seed_offset:
                 pass  # the seed's own raw subsets, copied above
             elif m.data == "raw":

@@ -20,6 +20,19 @@ def _raw_deps(name: str) -> list[str]:
     return [d if isinstance(d, str) else next(iter(d)) for d in st.get("deps", [])]
 
 
+def collapse(mods: set[str]) -> list[str]:
+    """The modules, with every package all of whose code the stage imports listed as its folder (one dep line
+    instead of one per file; DVC hashes the folder, .dvcignore keeps __pycache__ out)."""
+    out = set(mods)
+    folders = {p.parent for p in (ROOT / "lfdt").rglob("*.py") if "__pycache__" not in p.parts} - {ROOT / "lfdt"}
+    for folder in sorted(folders, key=lambda d: (len(d.parts), d)):  # outermost first
+        files = t.package_code(folder)
+        rel = folder.relative_to(ROOT).as_posix()
+        if files and files <= out and not any(rel.startswith(d + "/") for d in out if not d.endswith(".py")):
+            out = (out - files) | {rel}
+    return sorted(out)
+
+
 def main() -> None:
     text = (ROOT / "dvc.yaml").read_text()
     out, changed = [], []
@@ -42,10 +55,10 @@ def main() -> None:
         deps = []
         while lines and lines[0].startswith("    - ") or (lines and lines[0].startswith("    #")):
             deps.append(lines.pop(0))
-        code = [d for d in deps if re.match(r"    - (stages|lfdt)/[\w/]+\.py$", d)]
+        code = [d for d in deps if re.match(r"    - (stages/[\w/]+\.py|lfdt/[\w/]+(\.py)?)$", d)]
         other = [d for d in deps if d not in code]
         scripts = sorted(n for n in need if n.startswith("stages/"))
-        mods = sorted(n for n in need if n.startswith("lfdt/"))
+        mods = collapse({n for n in need if n.startswith("lfdt/")})
         new_code = [f"    - {n}" for n in scripts + mods]
         if new_code != code:
             changed.append(name)

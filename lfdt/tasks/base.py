@@ -40,6 +40,9 @@ class Task(Protocol):
     """Registry key, also the name in params, file paths, data files' metadata and reports."""
     layout: TaskLayout
     """The task's columns: per arm its state and action columns, the object's, the ends' positions."""
+    action_bounds: tuple[float, float] | None
+    """The clip a policy's actions get before they reach the scene, ``(low, high)``, or None where the scene clips
+    them itself."""
 
     def make_env(self, domain: str, config: Any = None, render_mode: str | None = None, size: int = 240) -> gym.Env:
         """A Gymnasium environment of the task in ``domain`` ('Y', 'R1H' or 'HR2'; observations in
@@ -66,6 +69,8 @@ class PlanarTask(Task, ABC):
     """The world axis ('x', 'y' or 'z') the object's angle turns about, positive by the right-hand rule."""
     workspace: np.ndarray
     """[[low a, low b], [high a, high b]] of the task plane, m: every commanded target is clipped into it."""
+    action_bounds = None
+    """Actions are targets on the plane: the scene clips them into :attr:`workspace`, the policy does not."""
 
     # ------------------------------------------------------------------ derived geometry
     @property

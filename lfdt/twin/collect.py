@@ -11,7 +11,7 @@ import numpy as np
 from lfdt import data, layout
 from lfdt.config import TwinParams
 from lfdt.tasks import registry
-from lfdt.twin.common import SeedJob, recordings, twin_params, twin_schema
+from lfdt.twin.common import SeedJob, recordings, twin_schema
 
 
 def record_random(task: str, domain: str, samples: int, episode_steps: int, seed: int, out_dir,
@@ -78,7 +78,7 @@ def collect(task: str, p: TwinParams, root: str | Path) -> dict:
 
 def twin_collect_job(job: SeedJob, progress=None) -> dict:
     """The recordings of one seed's run (:func:`collect_seed`) as a worker's job."""
-    p, _ = twin_params(job)
+    p = job.params
     stats = collect_seed(job.task, p, job.seed, job.data_root)
     if progress is not None:
         progress.update(1)

@@ -1,7 +1,7 @@
 """What the twin's stages share: one seed's job, the params it reads again in its worker, the recordings' folders and
 their Parquet schema (the same for the twin's recordings and the robots').
 
-The twin's stages mirror :mod:`lfdt.jobs`: :mod:`lfdt.twin.collect` (``twin_collect``), :mod:`lfdt.twin.train`
+The twin's stages mirror :mod:`lfdt.box_push_jobs`: :mod:`lfdt.twin.collect` (``twin_collect``), :mod:`lfdt.twin.train`
 (``twin_train``) and :mod:`lfdt.twin.evaluate` (``twin_evaluate``), each importing only what its stage runs, so that
 an edit of the translator reruns training, never data collection.
 
@@ -44,24 +44,18 @@ def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
 
 @dataclass(frozen=True)
 class SeedJob:
-    """One seed's share of a twin stage, run in a worker process (:func:`lfdt.parallel.run_jobs`): the stage's
-    params file is read again there, so that a job carries only paths."""
+    """One seed's share of a twin stage, run in a worker process (:func:`lfdt.parallel.run_jobs`), with the params
+    the stage validated (a worker does not read params.yaml again)."""
 
     task: str
     seed: int
-    params: str
-    """The stage's params.yaml."""
+    params: TwinParams
+    """params.yaml's ``twin``."""
+    device: str
+    """params.yaml's ``device``: the training device."""
     data_root: str | None = None
     """The twin's data folder (its ``<task>/s<seed>/`` recordings)."""
     models_dir: str | None = None
     """This seed's models (``<models>/<task>/s<seed>/``)."""
     video_dir: str | None = None
     """Where this seed's rollout videos go (None: no videos)."""
-
-
-def twin_params(job: SeedJob) -> tuple[TwinParams, str]:
-    """The twin's params and the training device, read again from the job's params file in its worker."""
-    from lfdt.stage import params
-
-    p = params(job.params)
-    return p.twin, p.device

@@ -12,7 +12,7 @@ from lfdt.config import TwinParams
 from lfdt.tasks import registry
 from lfdt.tasks.planar_env import TwinConfig, TwinEnv
 from lfdt.twin import TWIN_METHODS
-from lfdt.twin.common import SeedJob, twin_params
+from lfdt.twin.common import SeedJob
 
 
 def evaluate_policy(task: str, policy, trials: int, cfg: TwinConfig | None = None, purpose: str = "evaluation",
@@ -55,7 +55,7 @@ def evaluate_seed(task: str, p: TwinParams, seed: int, models_dir: str | Path,
 
 def twin_evaluate_job(job: SeedJob, progress=None) -> list[dict]:
     """:func:`evaluate_seed` as a worker's job."""
-    p, _ = twin_params(job)
+    p = job.params
     torch.set_num_threads(1)
     rows = evaluate_seed(job.task, p, job.seed, job.models_dir, job.video_dir)
     if progress is not None:

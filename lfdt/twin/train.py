@@ -10,14 +10,18 @@ from pathlib import Path
 
 import torch
 
-from lfdt import bc, data, layout, methods, translation
+from lfdt import bc, data, layout, methods
 from lfdt.config import TwinParams
 from lfdt.dynamics import fit_dynamics, load_random_y
 from lfdt.nets import save_state
 from lfdt.tasks import registry
 from lfdt.tasks.planar_env import TwinConfig
+from lfdt.translation.apply import translate_demos, translation_diagnostics
+from lfdt.translation.model import MeanTranslator, method_config
+from lfdt.translation.restarts import restart_seed, train_restarts
+from lfdt.translation.transitions import load_x_transitions, split_held_out
 from lfdt.twin import TWIN_METHODS
-from lfdt.twin.common import SeedJob, recordings, twin_params
+from lfdt.twin.common import SeedJob, recordings
 
 
 def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str | Path,
@@ -38,24 +42,23 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
     episodes = {pr: sorted(data.read_transitions(path, columns=["episode_index"], kind="demos", domain=pr, task=task)
                            .episode_index.unique().tolist())
                 for pr, path in demo_paths.items()}
-    demos = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=tl, kind="demos")
+    demos = {pr: load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=tl, kind="demos")
              for pr in layout.PAIRINGS}
-    random_x = {pr: translation.load_x_transitions(rec[f"random_{pr}"], pr, None, tl=tl, kind="random")
+    random_x = {pr: load_x_transitions(rec[f"random_{pr}"], pr, None, tl=tl, kind="random")
                 for pr in layout.PAIRINGS}
-    cfg = translation.method_config("lfdt", p.translator_for(task))
-    train_demos, held = translation.split_held_out(demos, cfg.holdout_fraction, seed)
-    trs, all_stats = translation.train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
-                                                std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device,
-                                                progress=progress)
+    cfg = method_config("lfdt", p.translator_for(task))
+    train_demos, held = split_held_out(demos, cfg.holdout_fraction, seed)
+    trs, all_stats = train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
+                                    std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device,
+                                    progress=progress)
     for r, tr in enumerate(trs):
         save_state(tr, models_dir / ("translator.pt" if r == 0 else f"translator_r{r}.pt"),
                    {"translator": cfg.model_dump(), "task": task, "seed": seed, "restart": r,
-                    "init_seed": translation.restart_seed(seed, r)})
+                    "init_seed": restart_seed(seed, r)})
     tstats = all_stats[0]
     dt = TwinConfig().control_dt
-    translated = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, cfg, dt, tl,
-                                             action_bounds=None)
-    diag = translation.translation_diagnostics(translated, demo_paths, episodes, tl)
+    translated = translate_demos(MeanTranslator(trs), dyn, demo_paths, episodes, cfg, dt, tl, action_bounds=None)
+    diag = translation_diagnostics(translated, demo_paths, episodes, tl)
     raw = {pr: data.read_transitions(path, kind="demos", domain=pr, task=task) for pr, path in demo_paths.items()}
     out = {"dynamics": {k: v for k, v in dres.items() if not isinstance(v, dict | list)},
            "translator": {"wall_time_s": sum(st["wall_time_s"] for st in all_stats), **tstats["final"], **diag,
@@ -85,7 +88,7 @@ def twin_train_job(job: SeedJob, progress=None) -> dict:
     from lfdt.nets import torch_device
     from lfdt.stage import numeric
 
-    p, device_name = twin_params(job)
+    p, device_name = job.params, job.device
     torch.set_num_threads(1)  # each worker one core; the models' own torch_threads apply inside
     run_params = {"twin": {"seeds": p.seeds, "dynamics": p.dynamics.model_dump(),
                            "translator": p.translator_for(job.task).model_dump(),

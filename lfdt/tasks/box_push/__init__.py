@@ -2,7 +2,7 @@
 
 One module per part, so that a stage imports (and DVC reruns it for) only what it uses:
 
-* :mod:`~lfdt.tasks.box_push.layout`: its columns (joint angles, joint velocities, end position per arm; the box);
+* :mod:`~lfdt.tasks.box_push.columns`: its columns (joint angles, joint velocities, end position per arm; the box);
 * :mod:`~lfdt.tasks.box_push.env`: the MuJoCo scene per domain, its success rule (``info['is_success']``) and the
   replay check of translated labels;
 * :mod:`~lfdt.tasks.box_push.random_motion`: random motion per domain (batched ``mujoco.rollout``);

@@ -11,7 +11,7 @@ quasi-static. Success needs the box centre near the goal, its yaw small *and* th
 so an expert cannot slam it through the goal, and one arm pushing faster than the other turns
 the box instead of moving it.
 
-The observation layout is :mod:`lfdt.tasks.box_push.layout`. Observations are computed from joint positions and
+The observation layout is :mod:`lfdt.tasks.box_push.columns`. Observations are computed from joint positions and
 velocities by :func:`observe` (planar forward kinematics), so the Gymnasium path and the
 batched ``mujoco.rollout`` path used for random-motion collection produce identical states.
 """
@@ -29,7 +29,7 @@ from gymnasium import spaces
 
 from lfdt import layout
 from lfdt.config import ArmConfig, EnvConfig
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 
 if TYPE_CHECKING:  # only for hints: the environment itself does not need pandas
     import pandas as pd
@@ -216,7 +216,7 @@ class BoxPushModel:
         n1, n2 = self.arms[0].n, self.arms[1].n
         self.nq_arm = (n1, n2)
         self.box_qpos = slice(n1 + n2, n1 + n2 + 3)
-        self.obs_dim = len(box_layout.state_columns(domain))
+        self.obs_dim = len(box_columns.state_columns(domain))
         self.act_dim = n1 + n2
         self.dt = cfg.timestep * cfg.frame_skip
         assert self.model.nq == n1 + n2 + 3 and self.model.nu == self.act_dim
@@ -375,16 +375,16 @@ def replay_check(df: pd.DataFrame, env_cfg: EnvConfig) -> dict:
     mean absolute yaw error in rad) and how often the replay solves the task: a physical-consistency check.
     """
     env = BoxPushEnv("Y", env_cfg)
-    cols = box_layout.state_columns("Y")
+    cols = box_columns.state_columns("Y")
     q_cols = [c for c in cols if ".q" in c]
     dq_cols = [c for c in cols if ".dq" in c]
-    a_cols = [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")]
+    a_cols = [layout.ACTION_PREFIX + c for c in box_columns.action_columns("Y")]
     pos_err, yaw_err, solved = [], [], []
     for _, g in df.groupby("episode_index", sort=True):
         g = g.sort_values("frame_index")
         first = g.iloc[0]
         qpos = np.concatenate([[first[layout.STATE_PREFIX + c] for c in q_cols],
-                               [first[layout.STATE_PREFIX + c] for c in box_layout.OBJECT_COLUMNS]])
+                               [first[layout.STATE_PREFIX + c] for c in box_columns.OBJECT_COLUMNS]])
         qvel = np.concatenate([[first[layout.STATE_PREFIX + c] for c in dq_cols], np.zeros(3)])
         env.reset(seed=0)
         env.set_state(qpos, qvel)
@@ -393,7 +393,7 @@ def replay_check(df: pd.DataFrame, env_cfg: EnvConfig) -> dict:
             _, _, term, _, info = env.step(a)
             success = success or term
         final = env.data.qpos[env.scene.box_qpos]
-        target = g.iloc[-1][[layout.NEXT_STATE_PREFIX + c for c in box_layout.OBJECT_COLUMNS]].to_numpy(float)
+        target = g.iloc[-1][[layout.NEXT_STATE_PREFIX + c for c in box_columns.OBJECT_COLUMNS]].to_numpy(float)
         pos_err.append(float(np.linalg.norm(final[:2] - target[:2])))
         yaw_err.append(float(abs((final[2] - target[2] + np.pi) % (2 * np.pi) - np.pi)))
         solved.append(success)

@@ -43,7 +43,7 @@ from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig, ProgramConfig
 from lfdt.nets import pin_linear_layers
 from lfdt.optim import Adam
 from lfdt.seeding import episode_seed, seed_everything
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import BoxPushEnv
 from lfdt.tasks.box_push.programmed import ProgrammedPartnerEnv
 
@@ -287,8 +287,8 @@ def save_expert(model: SAC, out_dir: Path, pairing: str, env_cfg: EnvConfig, cfg
         "pairing": pairing, "algorithm": "SAC (stable-baselines3)", "env_id": f"lfdt/BoxPush-{pairing}-v0",
         **protocol_doc(demos_cfg),
         "controls": "the human stand-in only (the robot replays its program)" if human_only else "both arms",
-        "observation_columns": box_layout.state_columns(pairing),
-        "action_columns": box_layout.arm_action_columns("h") if human_only else box_layout.action_columns(pairing),
+        "observation_columns": box_columns.state_columns(pairing),
+        "action_columns": box_columns.arm_action_columns("h") if human_only else box_columns.action_columns(pairing),
         "env": env_cfg.model_dump(), "experts": cfg.model_dump(),
         "config_hash": config_hash(pairing, env_cfg, cfg, demos_cfg), **extra,
     }
@@ -359,7 +359,7 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
     env = make_env(pairing, env_cfg, cfg)
     robot = layout.robot_arm(pairing)
     slot_of_robot = 0 if robot == "r1" else 1
-    n_first = box_layout.ARM_JOINTS[layout.DOMAIN_ARMS[pairing][0]]
+    n_first = box_columns.ARM_JOINTS[layout.DOMAIN_ARMS[pairing][0]]
     robot_sl = slice(0, n_first) if slot_of_robot == 0 else slice(n_first, None)
     human_sl = slice(n_first, None) if slot_of_robot == 0 else slice(0, n_first)
     kept, attempts, lengths = [], 0, []
@@ -375,12 +375,12 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
             lengths.append(ep["length"])
             if progress:
                 progress()
-    state_cols = box_layout.state_columns(pairing)
+    state_cols = box_columns.state_columns(pairing)
     schema = data.transitions_schema(
-        state_cols, box_layout.arm_action_columns(robot), box_layout.arm_action_columns("h"),
+        state_cols, box_columns.arm_action_columns(robot), box_columns.arm_action_columns("h"),
         extra={"attempt_index": (pa.int64(), "which expert attempt (reset seed index) this demonstration came from"),
                "next.success": (pa.bool_(), "the task is solved at frame t+1 (true only on the last frame)")},
-        metadata={"kind": "demos", "domain": pairing, "seed": cfg.seed, "layout": box_layout.describe(),
+        metadata={"kind": "demos", "domain": pairing, "seed": cfg.seed, "layout": box_columns.describe(),
                   "env": env_cfg.model_dump(), "demos": cfg.model_dump(), "robot": robot,
                   "protocol": cfg.protocol,
                   "description": f"successful demonstrations of pairing {pairing} ({cfg.protocol} protocol); the "

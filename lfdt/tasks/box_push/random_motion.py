@@ -26,7 +26,7 @@ import pyarrow as pa
 from lfdt import data
 from lfdt.config import EnvConfig, RandomConfig
 from lfdt.seeding import episode_seed
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import BoxPushModel
 
 
@@ -89,11 +89,11 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
     """Collect ``cfg.transitions`` random-motion transitions in ``domain``; returns the table and stats."""
     scene = BoxPushModel(domain, env_cfg)
     n_episodes = -(-cfg.transitions // cfg.episode_steps)
-    state_cols = box_layout.state_columns(domain)
+    state_cols = box_columns.state_columns(domain)
     schema = data.transitions_schema(
-        state_cols, box_layout.action_columns(domain),
+        state_cols, box_columns.action_columns(domain),
         metadata={
-            "kind": "random", "domain": domain, "seed": cfg.seed, "layout": box_layout.describe(),
+            "kind": "random", "domain": domain, "seed": cfg.seed, "layout": box_columns.describe(),
             "env": env_cfg.model_dump(), "random": cfg.model_dump(),
             "action_distribution": "uniform in [-amplitude, amplitude] per joint, held for "
                                    "U{hold_min..hold_max} control steps",

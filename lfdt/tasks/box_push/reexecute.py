@@ -24,7 +24,7 @@ import torch
 from lfdt import layout
 from lfdt.config import EnvConfig, TrackConfig
 from lfdt.dynamics import DynamicsModels
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import BoxPushEnv, forward_kinematics, jacobian
 
 
@@ -47,12 +47,12 @@ def execute(df: pd.DataFrame, env_cfg: EnvConfig, cfg: TrackConfig, dyn: Dynamic
     if cfg.controller == "inverse" and dyn is None:
         raise ValueError("track.controller = 'inverse' needs the dynamics models")
     env = BoxPushEnv("Y", env_cfg)
-    cols = box_layout.state_columns("Y")
+    cols = box_columns.state_columns("Y")
     s_cols = [layout.STATE_PREFIX + c for c in cols]
     n2s_cols = [layout.NEXT_STATE_PREFIX + c for c in cols]
-    a_cols = [layout.ACTION_PREFIX + c for c in box_layout.action_columns("Y")]
+    a_cols = [layout.ACTION_PREFIX + c for c in box_columns.action_columns("Y")]
     q_idx = [cols.index(c) for c in cols if ".q" in c]
-    box_idx = [cols.index(c) for c in box_layout.OBJECT_COLUMNS]
+    box_idx = [cols.index(c) for c in box_columns.OBJECT_COLUMNS]
     ee_idx = [[cols.index(f"{a}.ee_x"), cols.index(f"{a}.ee_y")] for a in ("r1", "r2")]
     limits = np.concatenate([np.asarray(a.cfg.joint_range) for a in env.scene.arms])
     kept, lengths, n_exec, n_success = [], [], 0, 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from lfdt.tasks.box_push.layout import BOX_PUSH
+from lfdt.tasks.box_push.columns import BOX_PUSH
 
 if TYPE_CHECKING:
     from lfdt.config import EnvConfig
@@ -20,6 +20,8 @@ class BoxPush:
 
     name = "box_push"
     layout = BOX_PUSH
+    action_bounds = (-1.0, 1.0)
+    """Normalised torque commands (times a joint's gear gives N m): a policy's actions are clipped to this range."""
 
     def make_env(self, domain: str, config: EnvConfig | dict | None = None, render_mode: str | None = None,
                  size: int = 240, scene: BoxPushModel | None = None) -> BoxPushEnv:

@@ -15,12 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfdt import methods, stage
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.config import Params
+from lfdt.tasks.box_push import columns as box_columns
 
 DYNAMICS_FILE = "dynamics.pt"
 """F and F^-1 in the dynamics folder (``stages/fit_dynamics.py`` writes it)."""
 
-TASK = box_layout.BOX_PUSH
+LAYOUT = box_columns.BOX_PUSH
 """The layout of the task the matrix stages serve: the simulated box push of Table I."""
 
 DATA_FILE = {"raw": None, "translated": "translated.parquet", "executed": "executed.parquet"}
@@ -35,7 +36,8 @@ class Config:
     method: str
     demos: int
     seed: int
-    params: str = "params.yaml"
+    params: Params
+    """params.yaml as the stage validated it (a worker does not read the file again)."""
     demos_dir: Path | None = None
     """The demonstrations of each pairing, ``<pairing>.parquet``."""
     random_dir: Path | None = None
@@ -69,7 +71,7 @@ class Config:
         return {"method": self.method, "demos": self.demos, "seed": self.seed, "config": self.name}
 
 
-def configs(method: str, demos: int, seeds: list[int], params: str, **dirs: Path) -> list[Config]:
+def configs(method: str, demos: int, seeds: list[int], params: Params, **dirs: Path) -> list[Config]:
     """The configurations of one matrix stage instance, one per seed; ``dirs`` are :class:`Config`'s folders its
     jobs use."""
     methods.get(method)

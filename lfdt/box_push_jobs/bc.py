@@ -7,8 +7,8 @@ import time
 
 import torch
 
-from lfdt import bc, data, layout, methods, mlflow_runs, stage
-from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
+from lfdt import bc, data, layout, methods, mlflow_runs
+from lfdt.box_push_jobs.common import DATA_FILE, DYNAMICS_FILE, LAYOUT, Config, numeric
 from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 
@@ -20,16 +20,16 @@ def bc_tasks(cfg: Config) -> list[bc.BCTask]:
     if m.data == "raw":
         return bc.tasks_for(cfg.method, raw_demos={pr: data.read_transitions(src / f"raw_{pr}.parquet", kind="demos",
                                                                              domain=pr) for pr in layout.PAIRINGS},
-                            tl=TASK)
+                            tl=LAYOUT)
     return bc.tasks_for(cfg.method, translated=data.read_transitions(src / DATA_FILE[m.data], kind=m.data, domain="Y"),
-                        tl=TASK)
+                        tl=LAYOUT)
 
 
 def bc_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
     """Behaviour cloning of a group of seeds of one configuration from their training sets: each member of the
     method's policy (one, or one per robot) trains as a stack over the seeds. One result per seed, in order."""
     t0 = time.perf_counter()
-    p = stage.params(cfgs[0].params)
+    p = cfgs[0].params
     bcfg = p.bc
     torch.set_num_threads(bcfg.torch_threads)
     device = torch_device(p.device)
@@ -40,7 +40,7 @@ def bc_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
         dyn = load_models(cfgs[0].dynamics_dir / DYNAMICS_FILE)
         for cfg, ts in zip(cfgs, tasks):
             for t in ts:
-                t.frame = bc.recovery_augment(t.frame, dyn, TASK, bcfg.recovery_copies, bcfg.recovery_noise,
+                t.frame = bc.recovery_augment(t.frame, dyn, LAYOUT, bcfg.recovery_copies, bcfg.recovery_noise,
                                               cfg.seed)
     names = [t.name for t in tasks[0]]
     seeds = [cfg.seed for cfg in cfgs]
@@ -63,7 +63,7 @@ def bc_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
                 metrics[k].update({f"{name}/{key}": v for key, v in st.items()})
         results = []
         for k, (cfg, run) in enumerate(zip(cfgs, runs)):
-            bc.BCPolicy(members[k], TASK).save(cfg.dir(cfg.policies_dir), {**cfg.tags(), "bc": bcfg.model_dump(),
+            bc.BCPolicy(members[k], LAYOUT).save(cfg.dir(cfg.policies_dir), {**cfg.tags(), "bc": bcfg.model_dump(),
                                                                             "members": names})
             metrics[k].update({**cfg.tags(), "job_wall_s": time.perf_counter() - t0, "mlflow_run_id": run.run_id})
             run.metrics(numeric(metrics[k]))

@@ -8,6 +8,7 @@ name through this module. Domains, slots and prefixes are every task's (:mod:`lf
 
 from __future__ import annotations
 
+from lfdt.config import EnvConfig
 from lfdt.layout import (
     ACTION_PREFIX,
     DOMAIN_ARMS,
@@ -19,7 +20,9 @@ from lfdt.layout import (
     robot_arm,
 )
 
-ARM_JOINTS: dict[str, int] = {"r1": 3, "r2": 3, "h": 4}
+ARM_JOINTS: dict[str, int] = {"r1": EnvConfig.JOINTS["robot"], "r2": EnvConfig.JOINTS["robot"],
+                              "h": EnvConfig.JOINTS["human"]}
+"""Joints per arm: the scene's (params ``env``; :attr:`lfdt.config.EnvConfig.JOINTS`)."""
 OBJECT_COLUMNS: tuple[str, ...] = ("box.x", "box.y", "box.yaw")
 
 

@@ -8,14 +8,20 @@ import time
 
 import torch
 
-from lfdt import data, layout, mlflow_runs, stage, translation
+from lfdt import data, layout, mlflow_runs
+from lfdt.box_push_jobs.common import DATA_FILE, DYNAMICS_FILE, LAYOUT, Config, numeric
 from lfdt.config import EnvConfig
 from lfdt.dynamics import load_models, load_random_y
-from lfdt.jobs.common import DATA_FILE, DYNAMICS_FILE, TASK, Config, numeric
 from lfdt.nets import save_state, torch_device
 from lfdt.parallel import Progress
-from lfdt.tasks.box_push import layout as box_layout
+from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import arm_specs, replay_check
+from lfdt.translation.apply import translate_demos, translated_table, translation_diagnostics, translator_diagnostics
+from lfdt.translation.kinematics import ArmKinematics, Kinematics
+from lfdt.translation.model import MeanTranslator, method_config
+from lfdt.translation.restarts import restart_key, restart_log, restart_seed
+from lfdt.translation.training import Member, train_translators
+from lfdt.translation.transitions import canonical_x_columns, load_x_transitions, split_held_out
 
 
 def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
@@ -23,23 +29,23 @@ def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list
     translate each seed's demonstrations and measure the translation. One result per seed, in order."""
     t0 = time.perf_counter()
     first = cfgs[0]
-    p = stage.params(first.params)
-    tcfg = translation.method_config(first.method, p.translator)
+    p = first.params
+    tcfg = method_config(first.method, p.translator)
     torch.set_num_threads(tcfg.torch_threads)
     device = torch_device(p.device)
     kin = box_push_kinematics(p.env)
     dyn = load_models(first.dynamics_dir / DYNAMICS_FILE)
     demo_paths = {pr: first.demos_dir / f"{pr}.parquet" for pr in layout.PAIRINGS}
-    random_x = {pr: translation.load_x_transitions(first.random_dir / f"{pr}.parquet", pr, tl=TASK, kind="random")
+    random_x = {pr: load_x_transitions(first.random_dir / f"{pr}.parquet", pr, tl=LAYOUT, kind="random")
                 for pr in layout.PAIRINGS}
-    y_random = load_random_y(first.random_dir / "Y.parquet", TASK).y
+    y_random = load_random_y(first.random_dir / "Y.parquet", LAYOUT).y
     per_seed = []
     for cfg in cfgs:
         episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
-        demos_all = {pr: translation.load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=TASK, with_actions=True,
-                                                        kind="demos")
+        demos_all = {pr: load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=LAYOUT, with_actions=True,
+                                            kind="demos")
                      for pr in layout.PAIRINGS}
-        demos, held = translation.split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
+        demos, held = split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
         per_seed.append((episodes, demos_all, demos, held))
     with contextlib.ExitStack() as runs_stack:
         runs = [runs_stack.enter_context(mlflow_runs.stage_run(
@@ -49,10 +55,10 @@ def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list
         members, logs = [], []
         for cfg, run, (_, _, demos, held) in zip(cfgs, runs, per_seed):
             for r in range(tcfg.restarts):
-                members.append(translation.Member(demos, translation.restart_seed(cfg.seed, r), held))
-                logs.append(translation.restart_log(run.metrics, r))
-        trained, trained_stats = translation.train_translators(
-            members, random_x, y_random, dyn, tcfg, p.dynamics.std_floor, logs, progress, tl=TASK, kinematics=kin,
+                members.append(Member(demos, restart_seed(cfg.seed, r), held))
+                logs.append(restart_log(run.metrics, r))
+        trained, trained_stats = train_translators(
+            members, random_x, y_random, dyn, tcfg, p.dynamics.std_floor, logs, progress, tl=LAYOUT, kinematics=kin,
             device=device)
         results = []
         for i, (cfg, run, (episodes, demos_all, _, held)) in enumerate(zip(cfgs, runs, per_seed)):
@@ -69,36 +75,36 @@ def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_
     for r, tr in enumerate(trs):
         save_state(tr, cfg.dir(cfg.translators_dir) / ("translator.pt" if r == 0 else f"translator_r{r}.pt"), {
             **cfg.tags(), "translator": tcfg.model_dump(), "restart": r,
-            "init_seed": translation.restart_seed(cfg.seed, r),
-            "x_columns": {pr: translation.canonical_x_columns(pr, TASK) for pr in layout.PAIRINGS},
-            "y_columns": TASK.state_columns("Y"), "episodes": episodes,
+            "init_seed": restart_seed(cfg.seed, r),
+            "x_columns": {pr: canonical_x_columns(pr, LAYOUT) for pr in layout.PAIRINGS},
+            "y_columns": LAYOUT.state_columns("Y"), "episodes": episodes,
             "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
-    df = translation.translate_demos(translation.MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
-                                     env_cfg.timestep * env_cfg.frame_skip, TASK)
-    table = translation.translated_table(df, {
+    df = translate_demos(MeanTranslator(trs), dyn, demo_paths, episodes, tcfg, env_cfg.timestep * env_cfg.frame_skip,
+                         LAYOUT)
+    table = translated_table(df, {
         "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
-        "source_episodes": episodes, "layout": box_layout.describe(),
+        "source_episodes": episodes, "layout": box_columns.describe(),
         "description": "demonstrations of X translated into domain Y; action.* are the BC labels "
                        f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
-        TASK)
+        LAYOUT)
     data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["translated"])
     with torch.no_grad():
         replay = replay_check(df, env_cfg)
         # G and D of each restart on their own; restart 0 under the plain names
         diag = {}
         for r, tr in enumerate(trs):
-            d = translation.translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=TASK,
-                                                   kinematics=kin, seed=cfg.seed)
-            diag.update({translation.restart_key(r, k): v for k, v in d.items()})
-    diag.update(translation.translation_diagnostics(df, demo_paths, episodes, TASK))
+            d = translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=LAYOUT, kinematics=kin,
+                                       seed=cfg.seed)
+            diag.update({restart_key(r, k): v for k, v in d.items()})
+    diag.update(translation_diagnostics(df, demo_paths, episodes, LAYOUT))
     stats = dict(all_stats[0])
     curve = stats.pop("curve")
     restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
     for r, st in enumerate(all_stats[1:], 1):
         st = dict(st)
         st.pop("curve")
-        restarts.update({translation.restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
-        restarts.update({translation.restart_key(r, k): v for k, v in st.items()})
+        restarts.update({restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
+        restarts.update({restart_key(r, k): v for k, v in st.items()})
     metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
                **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
                "mlflow_run_id": run.run_id}
@@ -106,14 +112,14 @@ def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_
     return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}
 
 
-def box_push_kinematics(env_cfg: EnvConfig) -> translation.Kinematics:
+def box_push_kinematics(env_cfg: EnvConfig) -> Kinematics:
     """What the translator may take from the box push's domain Y: its two 3-link robots (``translator.kinematics``)."""
-    cols = TASK.state_columns("Y")
+    cols = LAYOUT.state_columns("Y")
     out = []
     for arm in arm_specs("Y", env_cfg):
         n = arm.name
-        out.append(translation.ArmKinematics([cols.index(f"{n}.q{i}") for i in range(arm.n)],
-                                             [cols.index(f"{n}.dq{i}") for i in range(arm.n)],
-                                             [cols.index(f"{n}.ee_x"), cols.index(f"{n}.ee_y")],
-                                             list(arm.cfg.links), list(arm.base)))
-    return translation.Kinematics(out, env_cfg.timestep * env_cfg.frame_skip)
+        out.append(ArmKinematics([cols.index(f"{n}.q{i}") for i in range(arm.n)],
+                                 [cols.index(f"{n}.dq{i}") for i in range(arm.n)],
+                                 [cols.index(f"{n}.ee_x"), cols.index(f"{n}.ee_y")],
+                                 list(arm.cfg.links), list(arm.base)))
+    return Kinematics(out, env_cfg.timestep * env_cfg.frame_skip)

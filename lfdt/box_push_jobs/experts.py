@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfdt import mlflow_runs, stage
-from lfdt.jobs.common import numeric
+from lfdt.box_push_jobs.common import numeric
+from lfdt.config import Params
 from lfdt.nets import torch_device
 from lfdt.parallel import Progress
 from lfdt.tasks.box_push import experts
@@ -18,7 +19,8 @@ class ExpertJob:
     """One pairing's expert, with the folders its job writes (from the stage's command line)."""
 
     pairing: str
-    params: str
+    params: Params
+    """params.yaml as the stage validated it."""
     experts_dir: Path
     """The experts, one folder per pairing."""
     checkpoints_dir: Path
@@ -31,7 +33,7 @@ def expert_job(job: ExpertJob, progress: Progress | None = None) -> dict:
     """Train (or resume) the SAC expert of one pairing, evaluate it on fresh seeds, save it."""
     pairing = job.pairing
     t0 = time.perf_counter()
-    p = stage.params(job.params)
+    p = job.params
     cfg, env_cfg, demos_cfg = p.experts, p.env, p.demos
     out = job.experts_dir / pairing
     device = torch_device(p.device)

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfdt import bc, evaluation, mlflow_runs, stage
+from lfdt import bc, evaluation, mlflow_runs
+from lfdt.box_push_jobs.common import LAYOUT, Config, numeric
 from lfdt.config import EnvConfig
-from lfdt.jobs.common import TASK, Config, numeric
 from lfdt.parallel import Progress
 from lfdt.tasks.box_push.env import BoxPushModel
 from lfdt.tasks.box_push.task import TASK as BOX_PUSH_TASK
@@ -22,10 +22,10 @@ def evaluate_job(cfgs: list[Config], progress: Progress | None = None) -> list[d
     """Run the policies of a group of seeds from the evaluation start states (the same for every configuration).
     One result per seed, in order; a seed's trials do not depend on the others of its group."""
     t0 = time.perf_counter()
-    p = stage.params(cfgs[0].params)
+    p = cfgs[0].params
     ecfg = p.evaluation
     torch.set_num_threads(1)
-    policies = [bc.BCPolicy.load(cfg.dir(cfg.policies_dir), TASK)[0] for cfg in cfgs]
+    policies = [bc.BCPolicy.load(cfg.dir(cfg.policies_dir), LAYOUT, BOX_PUSH_TASK.action_bounds)[0] for cfg in cfgs]
     with contextlib.ExitStack() as runs_stack:
         runs = [runs_stack.enter_context(mlflow_runs.stage_run(
             "evaluate", {"evaluation": ecfg.model_dump(), **cfg.tags()}, tags={**cfg.tags(), "domain": "Y"},

@@ -12,11 +12,11 @@ produced (SHA-256, first 16 hex digits):
 * ``sac``: stable-baselines3's SAC gradient steps of the human stand-in beside its programmed robot (weights);
 * ``statistics``: NumPy and SciPy statistics of the reports (normalisers, intervals over seeds and start states).
 
-``python -m lfdt.fingerprint`` prints the hashes (``--out`` writes them as JSON); the ``fingerprint`` stage writes
-``reports/fingerprint.json``, and ``tests/test_fingerprint.py`` recomputes them and compares. Where the numeric code
-paths are pinned (:mod:`lfdt.numerics`), every x86-64 CPU with AVX2 should give the committed hashes; a component
-that differs names the library whose kernels moved. ``tools/cross_cpu.py`` runs this module on other CPU models
-under QEMU.
+``python -m lfdt.box_push_jobs.fingerprint`` prints the hashes (``--out`` writes them as JSON); the ``fingerprint``
+stage writes ``reports/fingerprint.json``, and ``tests/test_fingerprint.py`` recomputes them and compares. Where the
+numeric code paths are pinned (:mod:`lfdt.numerics`), every x86-64 CPU with AVX2 should give the committed hashes; a
+component that differs names the library whose kernels moved. ``tools/cross_cpu.py`` runs this module on other CPU
+models under QEMU.
 """
 
 from __future__ import annotations
@@ -77,10 +77,10 @@ def _mujoco() -> tuple[str, dict]:
 def _dynamics(random_y_table) -> tuple[str, object]:
     from lfdt.config import DynamicsConfig
     from lfdt.dynamics import RandomY, fit_dynamics
-    from lfdt.tasks.box_push import layout as box_layout
+    from lfdt.tasks.box_push import columns as box_columns
 
     df = random_y_table.to_pandas()
-    cols, acts = box_layout.state_columns("Y"), box_layout.action_columns("Y")
+    cols, acts = box_columns.state_columns("Y"), box_columns.action_columns("Y")
     d = RandomY(df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
                 df[[layout.ACTION_PREFIX + c for c in acts]].to_numpy(np.float32, copy=True),
                 df[[layout.NEXT_STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
@@ -90,13 +90,14 @@ def _dynamics(random_y_table) -> tuple[str, object]:
 
 
 def _translator(random_y_table, dyn) -> str:
-    from lfdt import translation
+    from lfdt.box_push_jobs.translator import box_push_kinematics
     from lfdt.config import EnvConfig, TranslatorConfig
-    from lfdt.jobs.translator import box_push_kinematics
-    from lfdt.tasks.box_push import layout as box_layout
+    from lfdt.tasks.box_push import columns as box_columns
+    from lfdt.translation.training import Member, train_translators
+    from lfdt.translation.transitions import Transitions, split_held_out
 
     df = random_y_table.to_pandas()
-    tl = box_layout.BOX_PUSH
+    tl = box_columns.BOX_PUSH
     # X data: Y's random motion relabelled as each pairing's (the shapes of X; what matters is the arithmetic)
     rng = np.random.default_rng(5)
     sets = {}
@@ -106,32 +107,30 @@ def _translator(random_y_table, dyn) -> str:
         x = rng.normal(size=(n, len(cols))).astype(np.float32)
         ep = df.episode_index.to_numpy()
         first = np.r_[True, ep[1:] != ep[:-1]]
-        sets[p] = translation.Transitions(x, x + 0.05 * rng.normal(size=x.shape).astype(np.float32), ep,
-                                          df.frame_index.to_numpy(), None, np.where(first[:, None], x,
-                                                                                    np.roll(x, 1, axis=0)))
+        sets[p] = Transitions(x, x + 0.05 * rng.normal(size=x.shape).astype(np.float32), ep,
+                              df.frame_index.to_numpy(), None, np.where(first[:, None], x, np.roll(x, 1, axis=0)))
     y = df[[layout.STATE_PREFIX + c for c in tl.state_columns("Y")]].to_numpy(np.float32, copy=True)
     members = []
     for seed in (1, 2):
-        train, held = translation.split_held_out(sets, 0.34, seed)
-        members.append(translation.Member(train, seed, held))
+        train, held = split_held_out(sets, 0.34, seed)
+        members.append(Member(train, seed, held))
     cfg = TranslatorConfig(hidden=[32, 32], iterations=30, batch_size=16, select_every=10, log_every=10,
                            hand_offset=True, lambda_hand=1.0)
-    trs, stats = translation.train_translators(members, sets, y, dyn, cfg, tl=tl,
-                                               kinematics=box_push_kinematics(EnvConfig()))
-    lsgan, _ = translation.train_translators(members[:1], sets, y, dyn,
-                                             cfg.model_copy(update={"gan_loss": "lsgan", "iterations": 10}), tl=tl,
-                                             kinematics=box_push_kinematics(EnvConfig()))
+    trs, stats = train_translators(members, sets, y, dyn, cfg, tl=tl, kinematics=box_push_kinematics(EnvConfig()))
+    lsgan, _ = train_translators(members[:1], sets, y, dyn,
+                                 cfg.model_copy(update={"gan_loss": "lsgan", "iterations": 10}), tl=tl,
+                                 kinematics=box_push_kinematics(EnvConfig()))
     curves = np.array([[v for c in st["curve"] for v in c.values()] for st in stats])
     return _hash(*(t.state_dict() for t in trs), lsgan[0].state_dict(), curves)
 
 
 def _bc() -> str:
     from lfdt import bc, evaluation
+    from lfdt.box_push_jobs.evaluate import box_push_trials
     from lfdt.config import BCConfig, EnvConfig
-    from lfdt.jobs.evaluate import box_push_trials
-    from lfdt.tasks.box_push import layout as box_layout
+    from lfdt.tasks.box_push import columns as box_columns
 
-    tl = box_layout.BOX_PUSH
+    tl = box_columns.BOX_PUSH
     cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
     tasks, rng = [], np.random.default_rng(3)
     for _ in range(2):
