@@ -80,3 +80,16 @@ def test_a_service_that_listens_passes():
         reach.check(f"127.0.0.1:{s.getsockname()[1]}", "a test server", timeout=2)
     with pytest.raises(reach.Unreachable, match=f"a test server at 127.0.0.1:{PORT} does not accept"):
         reach.check(f"127.0.0.1:{PORT}", "a test server", timeout=2)
+
+
+def test_a_repo_url_that_looks_like_an_option_is_a_url_to_git(tmp_path):
+    """A chain clones ``--repo-url`` after ``--``: a value that starts with a dash is a repository git cannot find,
+    never an option it runs (``--upload-pack`` names a program)."""
+    from lfdt.sweep.chain import ChainSpec, Remote, run_chain
+
+    marker = tmp_path / "ran"
+    spec = ChainSpec(name="x", stages=("a",), shared=(), repo_url=f"--upload-pack=touch {marker}", commit="HEAD",
+                     params_yaml="", remote=Remote("sweep"), workdir=str(tmp_path / "work"))
+    result = run_chain(spec)
+    assert not result.ok and "git clone" in result.error and not marker.exists()
+    assert f"repository '{spec.repo_url}' does not exist" in result.log_tail, result.log_tail

@@ -214,7 +214,7 @@ def _point_clone(root: Path, commit: str, point: Point) -> Path:
         clone.parent.mkdir(parents=True, exist_ok=True)
         tmp = clone.with_name(clone.name + ".partial")  # a crash mid-clone leaves this, never a half clone
         shutil.rmtree(tmp, ignore_errors=True)
-        _git(clone.parent, "clone", "--quiet", "--no-checkout", str(root), tmp.name)
+        _git(clone.parent, "clone", "--quiet", "--no-checkout", "--", str(root), tmp.name)
         _git(tmp, "checkout", "--quiet", commit)
         os.replace(tmp, clone)
     (clone / "params.yaml").write_text(point.params_yaml)
