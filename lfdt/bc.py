@@ -26,7 +26,7 @@ from torch import nn
 from lfdt import layout, methods
 from lfdt.config import BCConfig
 from lfdt.layout import TaskLayout
-from lfdt.nets import Normalizer, StackedMLP, check_finite, load_state, read_config, save_state
+from lfdt.nets import ModelFileError, Normalizer, StackedMLP, check_finite, load_state, read_config, save_state
 from lfdt.optim import Adam
 
 
@@ -260,10 +260,13 @@ class BCPolicy:
         members, cfg = [], None
         for pt in sorted(Path(model_dir).glob("*.pt")):
             cfg = read_config(pt)
-            m = BCMember(cfg["in_columns"], cfg["out_columns"], cfg["bc"]["hidden"], init=False)
+            try:
+                m = BCMember(cfg["in_columns"], cfg["out_columns"], cfg["bc"]["hidden"], init=False)
+            except (KeyError, TypeError) as err:
+                raise ModelFileError(f"{pt.with_suffix('.json')} is not a BC policy's config (no {err})") from None
             members.append(load_state(m, pt))
         if not members:
-            raise FileNotFoundError(f"no policy (*.pt) in {model_dir}")
+            raise ModelFileError(f"no policy (*.pt) in {model_dir}")
         return cls(members, tl, action_bounds), cfg
 
 

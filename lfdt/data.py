@@ -186,12 +186,44 @@ def read_transitions(path: str | Path, columns: list[str] | None = None, *, kind
     """
     if kind is not None or domain is not None or task is not None:
         check_identity(path, kind, domain, task)
+    if columns is not None:
+        with _readable(path):
+            have = pq.read_schema(_first_file(path)).names
+        missing = [c for c in columns if c not in have]
+        if missing:
+            raise DataFileError(f"{path}: missing columns {missing}")
     if Path(path).is_dir():
         files = sorted(Path(path).glob("*.parquet"))
         if not files:
             raise FileNotFoundError(f"no Parquet files in {path}")
-        return pd.concat([_read_table(f, columns).to_pandas() for f in files], ignore_index=True)
-    return _read_table(Path(path), columns).to_pandas()
+        df = pd.concat([_read_table(f, columns).to_pandas() for f in files], ignore_index=True)
+    else:
+        df = _read_table(Path(path), columns).to_pandas()
+    if df.empty:
+        raise DataFileError(f"{path}: holds no transitions (0 rows)")
+    check_finite(df, path)
+    return df
+
+
+MEASURED_PREFIXES = (layout.STATE_PREFIX, layout.NEXT_STATE_PREFIX, layout.ACTION_PREFIX, layout.HUMAN_ACTION_PREFIX)
+"""Columns that hold measurements or commands: every value must be a finite number."""
+
+
+def check_finite(df: pd.DataFrame, path: str | Path) -> None:
+    """DataFileError naming the file, the first column and the row (episode, frame) holding a NaN or an infinity
+    among the state, action and next-state columns."""
+    cols = [c for c in df.columns if c.startswith(MEASURED_PREFIXES)]
+    if not cols:
+        return
+    values = df[cols].to_numpy(np.float64)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        where = f"row {row}"
+        if "episode_index" in df.columns and "frame_index" in df.columns:
+            where += f" (episode {df['episode_index'].iloc[row]}, frame {df['frame_index'].iloc[row]})"
+        raise DataFileError(f"{path}: column {cols[col]} is {values[row, col]} at {where}; transitions must be "
+                            f"finite ({int(bad.sum())} values are not)")
 
 
 def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> list[str]:
@@ -207,7 +239,7 @@ def columns_of(df: pd.DataFrame | pa.Schema, prefix: str, names: list[str]) -> l
 def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskLayout) -> dict:
     """Validate a transitions file's identity (:func:`check_identity`) and its schema against the layout; returns
     its metadata. Raises DataFileError, naming the file."""
-    meta = check_identity(path, kind, domain)
+    meta = check_identity(path, kind, domain, tl.name)
     with _readable(path):
         schema = pq.read_schema(_first_file(path))
     problems = []
@@ -229,6 +261,7 @@ def check_transitions(path: str | Path, kind: str, domain: str, tl: layout.TaskL
             problems.append(f"column {f.name} has no description")
     if problems:
         raise DataFileError(f"{path}: " + "; ".join(problems))
+    read_transitions(path, expected)  # every expected column: rows there, and every value finite
     return meta
 
 
@@ -240,8 +273,8 @@ def demo_subset(path: str | Path, n: int, seed: int, purpose_key: str) -> list[i
     """
     episodes = np.unique(read_transitions(path, columns=["episode_index"], kind="demos").episode_index.to_numpy())
     if n > len(episodes):
-        raise ValueError(f"{n} demonstrations asked for (grid.demos) but {path} holds only {len(episodes)} "
-                         f"(demos.per_pairing)")
+        raise DataFileError(f"{n} demonstrations asked for (grid.demos) but {path} holds only {len(episodes)} "
+                            f"(demos.per_pairing)")
     key = [seed] + [ord(c) for c in purpose_key]
     rng = np.random.default_rng(key)
     return sorted(int(e) for e in rng.choice(episodes, size=n, replace=False))

@@ -78,7 +78,9 @@ class RandomY:
 def load_random_y(path, tl: TaskLayout) -> RandomY:
     """Read Y's random-motion transitions (a file or a recording directory) into arrays, columns by name."""
     cols, acts = tl.state_columns("Y"), tl.action_columns("Y")
-    df = data.read_transitions(path, kind="random", domain="Y", task=tl.name)
+    names = ([layout.STATE_PREFIX + c for c in cols] + [layout.ACTION_PREFIX + c for c in acts]
+             + [layout.NEXT_STATE_PREFIX + c for c in cols] + ["episode_index"])
+    df = data.read_transitions(path, names, kind="random", domain="Y", task=tl.name)
     return RandomY(
         y=df[[layout.STATE_PREFIX + c for c in cols]].to_numpy(np.float32, copy=True),
         a=df[[layout.ACTION_PREFIX + c for c in acts]].to_numpy(np.float32, copy=True),

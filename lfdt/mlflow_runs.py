@@ -23,6 +23,7 @@ from typing import Any
 from lfdt import numerics
 from lfdt.errors import StageError
 from lfdt.files import process_alive
+from lfdt.reach import Unreachable, check, redact
 
 EXPERIMENT_ENV = "LFDT_MLFLOW_EXPERIMENT"
 EXPERIMENT_KIND_TAG, EXPERIMENT_KIND = "mlflow.experimentKind", "custom_model_development"
@@ -66,23 +67,90 @@ class TrackingUnavailable(StageError):
     """The tracking server named by MLFLOW_TRACKING_URI does not answer."""
 
 
-def check_reachable(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
-    """For an http(s) tracking URI, one request to the server's /health with a timeout: TrackingUnavailable names
-    the URI when nothing answers (MLflow's own client would retry for minutes before failing)."""
+SQLITE_HEADER = b"SQLite format 3\x00"
+"""The first 16 bytes of every SQLite database file."""
+DB_SCHEMES = ("postgresql", "postgres", "mysql", "mssql")
+"""Database servers MLflow's SQL store talks to (``<scheme>[+driver]://...``), besides sqlite."""
+
+
+def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
+    """Check the tracking store ``uri`` before any run is opened; TrackingUnavailable names it and what is wrong.
+
+    * ``sqlite:///path``: no query string (MLflow would open another, empty store), the folder exists and can be
+      written, and an existing file is an SQLite database;
+    * ``postgresql://`` and the other database servers: the driver is installed, and the server accepts a connection
+      within ``timeout`` seconds (:mod:`lfdt.reach`);
+    * ``http(s)://``: the server answers on /health within ``timeout`` seconds;
+    * anything else (``file:`` stores, ``ftp://``, a mistyped scheme): refused, naming the schemes that work.
+    """
+    scheme = uri.split("://", 1)[0].lower() if "://" in uri else ""
+    base = scheme.split("+")[0]
+    if base in ("http", "https"):
+        _check_server(uri, timeout)
+    elif base == "sqlite":
+        _check_sqlite(uri)
+    elif base in DB_SCHEMES:
+        _check_database(uri, timeout)
+    elif base not in ("databricks", "databricks-uc", "uc"):
+        raise TrackingUnavailable(
+            f"MLFLOW_TRACKING_URI={redact(uri)}: {'a file store' if base in ('', 'file') else f'scheme {scheme!r}'} "
+            "is not a tracking store the stages can use; use sqlite:////absolute/path/mlflow.db, "
+            "postgresql://user@host/db (or mysql://, mssql://) or http(s)://host:port of a tracking server")
+
+
+def _check_server(uri: str, timeout: float) -> None:
     import urllib.error
     import urllib.request
 
-    if not uri.startswith(("http://", "https://")):
-        return
     try:
         urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=timeout).close()
     except urllib.error.HTTPError:
         return  # something answers (a proxy or another server version): let MLflow's client take it from here
-    except (urllib.error.URLError, OSError) as e:
+    except (urllib.error.URLError, OSError, ValueError) as e:
         reason = getattr(e, "reason", e)
-        raise TrackingUnavailable(f"the MLflow tracking server MLFLOW_TRACKING_URI={uri} does not answer within "
-                                  f"{timeout:g} s ({reason}); start it, or unset MLFLOW_TRACKING_URI to use "
+        raise TrackingUnavailable(f"the MLflow tracking server MLFLOW_TRACKING_URI={redact(uri)} does not answer "
+                                  f"within {timeout:g} s ({reason}); start it, or unset MLFLOW_TRACKING_URI to use "
                                   f"{workspace_root() / 'mlflow.db'}") from None
+
+
+def _check_sqlite(uri: str) -> None:
+    if "?" in uri:
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: a query string is not supported (MLflow would open "
+                                  "another, empty store); give the database's path alone, sqlite:////path/mlflow.db")
+    path = Path(uri.split("://", 1)[1][1:] or ".")  # sqlite:///rel and sqlite:////abs
+    if str(path) in (".", ":memory:"):
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: an in-memory store keeps no run; give a file, "
+                                  "sqlite:////path/mlflow.db")
+    folder = path.parent
+    if not folder.is_dir():
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: the folder {folder} does not exist")
+    if path.exists():
+        with open(path, "rb") as fh:
+            head = fh.read(len(SQLITE_HEADER))
+        if head and head != SQLITE_HEADER:
+            raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: {path} is not an SQLite database (damaged, or "
+                                      "another kind of file); move it aside and the next stage starts a new store")
+        if not os.access(path, os.W_OK):
+            raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: {path} cannot be written")
+    elif not os.access(folder, os.W_OK):
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: the folder {folder} cannot be written")
+
+
+def _check_database(uri: str, timeout: float) -> None:
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    try:
+        dialect = make_url(uri).get_dialect()
+        dialect.import_dbapi()
+    except (ArgumentError, NoSuchModuleError, ImportError) as err:
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={redact(uri)}: its database driver cannot be loaded "
+                                  f"({type(err).__name__}: {err}); install it (e.g. pip install psycopg2-binary for "
+                                  "postgresql://) or name an installed one (postgresql+psycopg2://...)") from None
+    try:
+        check(uri, "the MLflow tracking database (MLFLOW_TRACKING_URI)", timeout=timeout)
+    except Unreachable as err:
+        raise TrackingUnavailable(str(err)) from None
 
 
 OUTPUT_PATHS = ("reports", "dvc.lock")
@@ -162,13 +230,18 @@ def experiment_id(name: str | None = None) -> str:
 
     name = name or os.environ.get(EXPERIMENT_ENV, DEFAULT_EXPERIMENT)
     uri = tracking_uri()
-    check_reachable(uri)
+    check_tracking_uri(uri)
     mlflow.set_tracking_uri(uri)
     lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
         client = mlflow.MlflowClient()
-        exp = client.get_experiment_by_name(name)
+        try:
+            exp = client.get_experiment_by_name(name)
+        except Exception as err:  # noqa: BLE001 - any failure of the first query means the store is unusable
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise TrackingUnavailable(f"the MLflow tracking store MLFLOW_TRACKING_URI={redact(uri)} cannot be read "
+                                      f"({type(err).__name__}: {first})") from err
         if exp is None:
             # a local store keeps artifacts beside the database, whatever directory a stage runs from
             artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None

@@ -260,15 +260,49 @@ def save_state(module: nn.Module, path: str | Path, config: dict) -> None:
     os.replace(tmp, cfg_path)
 
 
+class ModelFileError(StageError):
+    """A saved model that cannot be loaded: names the file and what is wrong with it."""
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
+
+
 def load_state(module: nn.Module, path: str | Path) -> nn.Module:
-    """Load a state dict saved by :func:`save_state` (``weights_only=True``) into module; eval mode."""
-    module.load_state_dict(torch.load(path, weights_only=True, map_location="cpu"))
+    """Load a state dict saved by :func:`save_state` (``weights_only=True``) into module; eval mode. A file that is
+    missing, truncated, not a state dict or one of another model raises :class:`ModelFileError` naming it."""
+    path = Path(path)
+    try:
+        state = torch.load(path, weights_only=True, map_location="cpu")
+    except FileNotFoundError:
+        raise ModelFileError(f"{path} is missing") from None
+    except Exception as err:  # noqa: BLE001 - torch raises many kinds for a damaged file; each is this one error
+        raise ModelFileError(f"{path} is not a saved state dict (truncated or another kind of file: "
+                             f"{type(err).__name__}: {_first_line(err)})") from None
+    if not isinstance(state, dict):
+        raise ModelFileError(f"{path} holds a {type(state).__name__}, not a state dict")
+    try:
+        module.load_state_dict(state)
+    except RuntimeError as err:
+        raise ModelFileError(f"{path} holds the weights of another model than a {type(module).__name__} "
+                             f"({_first_line(err)})") from None
     return module.eval()
 
 
 def read_config(path: str | Path) -> dict:
-    """The JSON config beside a saved state dict."""
-    return json.loads(Path(path).with_suffix(".json").read_text())
+    """The JSON config beside a saved state dict; :class:`ModelFileError` names it when it is missing or not JSON."""
+    cfg = Path(path).with_suffix(".json")
+    try:
+        out = json.loads(cfg.read_text())
+    except FileNotFoundError:
+        raise ModelFileError(f"{cfg} is missing: every saved model has its config beside it ({Path(path).name} was "
+                             "copied without it, or saved by something else)") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ModelFileError(f"{cfg} is not JSON ({err})") from None
+    if not isinstance(out, dict):
+        raise ModelFileError(f"{cfg} holds a JSON {type(out).__name__}, not a model's config")
+    return out
 
 
 def batches(n: int, batch_size: int, generator: torch.Generator) -> torch.Tensor:

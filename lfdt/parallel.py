@@ -21,6 +21,8 @@ from typing import Any, Protocol
 
 from tqdm import tqdm
 
+from lfdt.errors import StageError
+
 
 class Progress(Protocol):
     """What a job reports its work through (a tqdm bar has this method)."""
@@ -69,6 +71,13 @@ def _init_worker(parent: int, q) -> None:
     threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
+def _describe(job: Any) -> str:
+    """A job in an error message: its ``name`` (or each of a group's names) where it has one, else its repr, short."""
+    names = [getattr(j, "name", None) for j in (job if isinstance(job, list | tuple) else [job])]
+    text = ", ".join(n for n in names if isinstance(n, str)) or repr(job)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
 def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
     progress = _QueueProgress(_PROGRESS_QUEUE)
     try:
@@ -111,7 +120,11 @@ def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: i
                     if f.done() and f.exception() is not None:
                         for other in futures:
                             other.cancel()
-                        raise RuntimeError(f"job {jobs[i]!r} failed: {f.exception()}") from f.exception()
+                        err = f.exception()
+                        if isinstance(err, StageError):  # its message names the file or key: the stage's one line
+                            raise err
+                        raise RuntimeError(f"job {i + 1} of {len(jobs)} ({_describe(jobs[i])}) failed: "
+                                           f"{type(err).__name__}: {err}") from err
                 return [f.result() for f in futures]
         finally:
             done.set()

@@ -5,7 +5,7 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 
 from lfdt import methods, parallel, stage
 from lfdt.box_push_jobs import common
-from lfdt.box_push_jobs.evaluate import evaluate_job
+from lfdt.box_push_jobs.evaluate import check_policies, evaluate_job
 
 
 def run() -> None:
@@ -16,6 +16,7 @@ def run() -> None:
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, policies_dir=args.policies,
                           videos_dir=args.videos)
     group = cfgs[0].group
+    check_policies(cfgs)
     (args.videos / group).mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos
     with stage.frame(args.reports / f"{group}.json") as f:
         results = common.flatten(parallel.run_jobs(

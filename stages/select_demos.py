@@ -14,6 +14,8 @@ def run() -> None:
     ap.add_argument("--demos", required=True, type=int)
     args = ap.parse_args()
     p = stage.params(args.params)
+    for pairing in layout.PAIRINGS:  # the whole file, before any subset is written: identity, columns, values
+        data.check_transitions(args.demos_dir / f"{pairing}.parquet", "demos", pairing, common.LAYOUT)
     for cfg in common.configs("bc_no_translation", args.demos, p.grid.seeds, p, bc_data_dir=args.bc_data):
         for pairing in layout.PAIRINGS:
             path = args.demos_dir / f"{pairing}.parquet"

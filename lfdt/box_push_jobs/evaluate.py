@@ -18,6 +18,13 @@ from lfdt.tasks.box_push.env import BoxPushModel
 from lfdt.tasks.box_push.task import TASK as BOX_PUSH_TASK
 
 
+def check_policies(cfgs: list[Config]) -> None:
+    """Load every seed's policy once, in the stage's process, before any trial: a missing or damaged one stops the
+    stage naming its file (:class:`lfdt.nets.ModelFileError`) before a worker starts evaluating the others."""
+    for cfg in cfgs:
+        bc.BCPolicy.load(cfg.dir(cfg.policies_dir), LAYOUT, BOX_PUSH_TASK.action_bounds)
+
+
 def evaluate_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
     """Run the policies of a group of seeds from the evaluation start states (the same for every configuration).
     One result per seed, in order; a seed's trials do not depend on the others of its group."""
