@@ -20,7 +20,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from lfdt import numerics
+from lfdt import lifeline, numerics
 from lfdt.errors import StageError
 from lfdt.files import process_alive
 from lfdt.reach import Unreachable, check, redact
@@ -343,6 +343,7 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
     run = _retry(lambda: client.create_run(exp, run_name=run_name or stage))
     tracker = Tracker(run.info.run_id)
     status = "FAILED"
+    _OPEN_RUNS.add(run.info.run_id)
     try:
         tracker.tags(all_tags)
         tracker.params(params)
@@ -353,6 +354,23 @@ def stage_run(stage: str, params: Mapping[str, Any], tags: Mapping[str, Any] | N
             tracker.flush()
         finally:
             _retry(lambda: client.set_terminated(run.info.run_id, status=status))
+            _OPEN_RUNS.discard(run.info.run_id)
+
+
+_OPEN_RUNS: set[str] = set()
+"""The runs this process has open: marked KILLED when it ends because its launcher is gone."""
+
+
+def _kill_open_runs() -> None:
+    import mlflow
+
+    client = mlflow.MlflowClient()
+    for rid in list(_OPEN_RUNS):
+        with contextlib.suppress(Exception):  # ending anyway: what is not marked now, the next run of it marks
+            client.set_terminated(rid, status="KILLED")
+
+
+lifeline.on_orphaned(_kill_open_runs)
 
 
 def mark_killed_runs(client, experiment: str, run_name: str) -> list[str]:

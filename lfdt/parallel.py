@@ -21,6 +21,7 @@ from typing import Any, Protocol
 
 from tqdm import tqdm
 
+from lfdt import lifeline
 from lfdt.errors import StageError
 
 
@@ -62,13 +63,7 @@ def _init_worker(parent: int, q) -> None:
     rerun of the same stage."""
     global _PROGRESS_QUEUE
     _PROGRESS_QUEUE = q
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(3)
-
-    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+    lifeline.watch(parent)
 
 
 def _describe(job: Any) -> str:

@@ -29,9 +29,18 @@ def params(path: str | Path = "params.yaml") -> Params:
 
 def main(fn: Callable[[], None]) -> None:
     """Run a stage's main; a params problem or a :class:`~lfdt.errors.StageError` (a wrong data file, an unreachable
-    tracking server, a diverged training) exits 2 with its message; anything else raises (non-zero exit)."""
+    tracking server, a diverged training) exits 2 with its message; anything else raises (non-zero exit).
+
+    The stage ends within a second of the `dvc repro` that started it (:func:`lfdt.lifeline.watch`; its workers end
+    with it), and holds a lock on its command line in this workspace while it runs, so that a rerun never writes
+    the same outputs beside a stage still running."""
+    from lfdt import lifeline
+
+    lifeline.watch()
     try:
-        fn()
+        with lifeline.stage_lock(f"{Path.cwd()}: {' '.join(sys.argv)}",
+                                 mlflow_runs.workspace_root() / ".dvc/tmp/lfdt-locks"):
+            fn()
     except (ParamsError, StageError) as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)

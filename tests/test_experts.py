@@ -106,6 +106,8 @@ def test_killed_training_resumes_where_it_stopped(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "reports/experts/R1H_train.json").read_text())
     assert report["resumed_from_timesteps"] == stopped_at
+    assert "R1H: resuming from checkpoint checkpoints/experts/R1H/" in done.stderr  # the rerun says where it resumes
+    assert f"at step {stopped_at:,} of 3,000" in done.stderr, done.stderr[-2000:]
     # the learning curve keeps its points from before the kill (every log_every = 200 steps, once each)
     with open(tmp_path / "reports/experts/R1H_curve.csv") as fh:
         steps = [int(r["timesteps"]) for r in csv.DictReader(fh)]

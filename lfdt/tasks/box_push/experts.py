@@ -25,6 +25,7 @@ import hashlib
 import json
 import os
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -246,6 +247,8 @@ def train_expert(pairing: str, env_cfg: EnvConfig, cfg: ExpertsConfig, demos_cfg
     if latest is not None:
         curve = checkpoints.load(model, latest)
         resumed_from = model.num_timesteps
+        print(f"{pairing}: resuming from checkpoint {latest} at step {resumed_from:,} of {cfg.total_timesteps:,} "
+              "(an earlier run with the same params stopped there)", file=sys.stderr, flush=True)
     if progress is not None:
         progress.update(resumed_from)
     callback = TrainingCallback(cfg, checkpoints, log, progress)
