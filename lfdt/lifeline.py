@@ -12,6 +12,7 @@ import contextlib
 import fcntl
 import hashlib
 import os
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -22,6 +23,9 @@ from lfdt.errors import StageError
 ORPHANED_EXIT = 3
 """The exit code of a process that ended because its launcher was gone."""
 POLL_S = 0.5
+LOCK_DIR = Path(tempfile.gettempdir()) / "lfdt-stage-locks"
+"""Where stages hold their locks: this machine's (a lock is named after the stage's folder and command line, and
+writes nothing into the workspace)."""
 LOCK_WAIT_S = 30.0
 """How long a stage waits for another copy of itself to end (an orphan ends within a second of its launcher)."""
 

@@ -38,8 +38,7 @@ def main(fn: Callable[[], None]) -> None:
 
     lifeline.watch()
     try:
-        with lifeline.stage_lock(f"{Path.cwd()}: {' '.join(sys.argv)}",
-                                 mlflow_runs.workspace_root() / ".dvc/tmp/lfdt-locks"):
+        with lifeline.stage_lock(f"{Path.cwd()}: {' '.join(sys.argv)}", lifeline.LOCK_DIR):
             fn()
     except (ParamsError, StageError) as err:
         print(f"error: {err}", file=sys.stderr)

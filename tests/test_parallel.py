@@ -31,7 +31,7 @@ def test_results_come_back_in_job_order():
 def test_a_failing_job_stops_the_stage_named():
     import pytest
 
-    with pytest.raises(RuntimeError, match="job 2 failed: two is bad"):
+    with pytest.raises(RuntimeError, match=r"job 2 of 3 \(2\) failed: ValueError: two is bad"):
         parallel.run_jobs(fail_on_two, [1, 2, 3], workers=2)
 
 
