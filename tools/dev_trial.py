@@ -35,6 +35,7 @@ from lfdt.box_push_jobs.evaluate import evaluate_job
 from lfdt.box_push_jobs.track import track_job
 from lfdt.box_push_jobs.translator import translator_job
 from lfdt.config import validate_params
+from lfdt.csvlog import append_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 DEV_SEEDS = list(range(40, 50))
@@ -187,33 +188,30 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
     fields = ["date", "trial", "hypothesis", "changes", "method", "demos", "seeds", "start_states", "success_pct",
               "ci_low_pct", "ci_high_pct", "worst_seed_pct", "per_seed_pct", "diff_vs_bc_no_translation_pct",
               "diff_ci_low_pct", "diff_ci_high_pct", "cpu_model", "numerics", "wall_min"]
-    new = not trials.exists()
     info = numerics.describe()
-    with trials.open("a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        if new:
-            w.writeheader()
-        for (m, n), o in rows.items():
-            lo, hi = evaluation.seed_state_interval(o)
-            per = o.mean(axis=1)
-            base = rows.get(("bc_no_translation", n))
-            if base is None and args.baseline_from:
-                base = load_outcomes(args.baseline_from, "bc_no_translation", n, args.seeds)
-            dlo = dhi = diff = ""
-            if base is not None and m != "bc_no_translation":
-                d = o - base
-                diff = f"{100 * d.mean():.1f}"
-                a, b = evaluation.paired_difference_interval(o, base)
-                dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
-            w.writerow({"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
-                        "changes": " ".join(args.set + ([f"BC seed = seed + {args.bc_seed_offset}"]
-                                                        if args.bc_seed_offset else [])), "method": m, "demos": n,
-                        "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
-                        "success_pct": f"{100 * o.mean():.1f}", "ci_low_pct": f"{100 * lo:.1f}",
-                        "ci_high_pct": f"{100 * hi:.1f}", "worst_seed_pct": f"{100 * per.min():.1f}",
-                        "per_seed_pct": " ".join(f"{100 * x:.1f}" for x in per),
-                        "diff_vs_bc_no_translation_pct": diff, "diff_ci_low_pct": dlo, "diff_ci_high_pct": dhi,
-                        "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"})
+    out = []
+    for (m, n), o in rows.items():
+        lo, hi = evaluation.seed_state_interval(o)
+        per = o.mean(axis=1)
+        base = rows.get(("bc_no_translation", n))
+        if base is None and args.baseline_from:
+            base = load_outcomes(args.baseline_from, "bc_no_translation", n, args.seeds)
+        dlo = dhi = diff = ""
+        if base is not None and m != "bc_no_translation":
+            d = o - base
+            diff = f"{100 * d.mean():.1f}"
+            a, b = evaluation.paired_difference_interval(o, base)
+            dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
+        out.append({"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
+                    "changes": " ".join(args.set + ([f"BC seed = seed + {args.bc_seed_offset}"]
+                                                    if args.bc_seed_offset else [])), "method": m, "demos": n,
+                    "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
+                    "success_pct": f"{100 * o.mean():.1f}", "ci_low_pct": f"{100 * lo:.1f}",
+                    "ci_high_pct": f"{100 * hi:.1f}", "worst_seed_pct": f"{100 * per.min():.1f}",
+                    "per_seed_pct": " ".join(f"{100 * x:.1f}" for x in per),
+                    "diff_vs_bc_no_translation_pct": diff, "diff_ci_low_pct": dlo, "diff_ci_high_pct": dhi,
+                    "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"})
+    append_rows(trials, fields, [[str(r[f]) for f in fields] for r in out])  # all rows in one write
     keys = sorted({k for r in diag_rows for k in r})
     if not keys:
         return

@@ -5,8 +5,9 @@ one trial at a time and read by the ``twin_evaluate`` stage (backend 'real'). On
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
+
+from lfdt.csvlog import CsvLogError, append_rows
 
 HEADER = ["trial", "success"]
 OUTCOMES = {"True": True, "False": False}
@@ -46,14 +47,10 @@ def read_trials(path: str | Path) -> list[tuple[int, bool]]:
 
 
 def append_trial(path: str | Path, trial: int, success: bool) -> None:
-    """Append one trial's outcome, durably (it survives a crash during the next trial)."""
-    path = Path(path)
-    new = not path.exists() or path.stat().st_size == 0
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a", newline="") as fh:
-        w = csv.writer(fh)
-        if new:
-            w.writerow(HEADER)
-        w.writerow([trial, "True" if success else "False"])
-        fh.flush()
-        os.fsync(fh.fileno())
+    """Append one trial's outcome, durably (it survives a crash during the next trial), on a line of its own even
+    when the file was edited by hand (:func:`lfdt.csvlog.append_rows`); a file with another header raises
+    :class:`DeployLogError` naming it."""
+    try:
+        append_rows(path, HEADER, [[str(trial), "True" if success else "False"]])
+    except CsvLogError as err:
+        raise DeployLogError(str(err)) from None

@@ -144,7 +144,7 @@ def run_chain(spec: ChainSpec) -> ChainResult:
                          clone=str(clone))
     with open(log_path, "w") as log:
         try:
-            git(["clone", "--quiet", "--no-checkout", spec.repo_url, str(clone)])
+            git(["clone", "--quiet", "--no-checkout", "--", spec.repo_url, str(clone)])  # a URL is never an option
             git(["checkout", "--quiet", spec.commit], cwd=clone)
             (clone / "params.yaml").write_text(spec.params_yaml)
             env = stage_env(clone, spec.env)

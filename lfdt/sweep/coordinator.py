@@ -22,7 +22,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from lfdt import mlflow_runs
+from lfdt import mlflow_runs, reach
 from lfdt.errors import StageError
 from lfdt.files import temp_path
 from lfdt.sweep import runcache
@@ -125,6 +125,7 @@ def run_sweep(root: Path, remote: Remote, address: str | None = None, cpus_per_c
 
     start = time.monotonic()
     root = root.resolve()
+    check_services(address, remote)
     commit = check_workspace(root)
     extra = tracking_env(forward_env or [])
     # the experiment and its tags exist before any stage starts: stages of two chains that both find them missing
@@ -213,7 +214,7 @@ def _point_clone(root: Path, commit: str, point: Point) -> Path:
         clone.parent.mkdir(parents=True, exist_ok=True)
         tmp = clone.with_name(clone.name + ".partial")  # a crash mid-clone leaves this, never a half clone
         shutil.rmtree(tmp, ignore_errors=True)
-        _git(clone.parent, "clone", "--quiet", "--no-checkout", str(root), tmp.name)
+        _git(clone.parent, "clone", "--quiet", "--no-checkout", "--", str(root), tmp.name)
         _git(tmp, "checkout", "--quiet", commit)
         os.replace(tmp, clone)
     (clone / "params.yaml").write_text(point.params_yaml)
@@ -244,6 +245,28 @@ def _experiment_file(root: Path, commit: str, name: str, path: str) -> str:
     return proc.stdout if proc.returncode == 0 else ""
 
 
+RAY_LOCAL = (None, "", "auto", "local")
+"""``--address`` values that start or find a Ray instance on this machine rather than name a cluster's head."""
+RAY_HEAD_PORT = 6379
+"""The port of a Ray head given as a bare host."""
+
+
+def check_services(address: str | None, remote: Remote, timeout: float = reach.TIMEOUT_S) -> None:
+    """Before any work: the Ray cluster's head, the tracking server or database (``MLFLOW_TRACKING_URI``) and the
+    remote's S3 endpoint each accept a connection within ``timeout`` seconds, or :class:`lfdt.reach.Unreachable`
+    names the one that does not and its address (Ray, MLflow and boto would otherwise retry for minutes, Ray only
+    after the shared stages have run)."""
+    if address not in RAY_LOCAL:
+        reach.check(address, "the Ray cluster (--address or RAY_ADDRESS)", default_port=RAY_HEAD_PORT,
+                    timeout=timeout)
+    uri = mlflow_runs.tracking_uri()
+    if uri.split(":", 1)[0].split("+")[0] in ("http", "https", "postgresql", "postgres", "mysql", "mssql"):
+        reach.check(uri, "the MLflow tracking store (MLFLOW_TRACKING_URI)", timeout=timeout)
+    if remote.endpoint_url:
+        reach.check(remote.endpoint_url, f"the S3 endpoint of DVC remote {remote.name!r} (--endpoint-url)",
+                    timeout=timeout)
+
+
 def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
     """Sweep every point of ``--set`` (:mod:`lfdt.sweep.points`) and record each in ``root`` as a DVC experiment
     named after its params; returns a summary. ``kwargs`` go to :func:`run_sweep` (the chains of all points run on
@@ -255,6 +278,7 @@ def run_points(root: Path, sets: list[str], remote: Remote, **kwargs) -> dict:
     """
     start = time.monotonic()
     root = root.resolve()
+    check_services(kwargs.get("address"), remote)
     commit = check_workspace(root)
     env = stage_env(root, tracking_env(kwargs.get("forward_env") or []))
     points = expand((root / "params.yaml").read_text(), sets)
