@@ -10,18 +10,12 @@ import sys
 import time
 
 import pytest
+import services
 
 from lfdt import reach
 
-
-def closed_port() -> int:
-    """A port of 127.0.0.1 nothing listens on (bound, then released)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-PORT = closed_port()
+PORT = services.free_port()
+"""A port of 127.0.0.1 nothing listens on (bound, then released)."""
 
 CASES = [
     # (id, arguments, environment, what the one line must say)

@@ -337,7 +337,8 @@ def test_every_policy_is_a_registered_mlflow_model(project, tmp_path):
 
 def test_an_edit_of_the_gan_reruns_training_never_data_collection(project):
     """lfdt/translation/training.py is the translator's training code: the stages that train translators go stale, the
-    twin's data collection and the demonstrations do not."""
+    twin's data collection and the demonstrations do not, nor the re-execution of translations (track_demos applies
+    translators and does not run their training code)."""
     dst, _ = project
     gan = dst / "lfdt/translation/training.py"
     original = gan.read_bytes()
@@ -348,7 +349,7 @@ def test_an_edit_of_the_gan_reruns_training_never_data_collection(project):
         gan.write_bytes(original)
     assert {"twin_train@block_push", "train_translator@lfdt-3"} <= stale
     assert not stale & {"twin_collect@block_push", "twin_collect@peg_insertion", "collect_demos", "collect_random",
-                        "train_experts", "fit_dynamics"}, sorted(stale)
+                        "train_experts", "fit_dynamics", "track_demos@3"}, sorted(stale)
 
 
 def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(project):
