@@ -26,14 +26,19 @@ REPRO_TIMEOUT_S = 2400
 per chain: a guard against a hang, well inside CI's 90 minutes, never a speed test)."""
 
 
-def dvc(args: list[str], cwd: Path, timeout: float = 600) -> str:
+def dvc(args: list[str], cwd: Path, timeout: float = 600, fails: bool = False,
+        tracking_uri: str | None = None) -> str:
     """Run dvc in ``cwd`` with this interpreter's tools first on PATH and the project's own tracking store (any
-    MLFLOW_TRACKING_URI of the caller's removed); fail the test with its output otherwise."""
+    MLFLOW_TRACKING_URI of the caller's removed; ``tracking_uri`` sets one); fail the test with its output unless
+    dvc succeeded (or, with ``fails``, unless it failed)."""
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "DVC_NO_ANALYTICS": "1"}
     env.pop("MLFLOW_TRACKING_URI", None)
+    if tracking_uri is not None:
+        env["MLFLOW_TRACKING_URI"] = tracking_uri
     proc = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=timeout)
-    assert proc.returncode == 0, f"dvc {' '.join(args)} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    assert (proc.returncode != 0) == fails, (f"dvc {' '.join(args)} {'succeeded' if fails else 'failed'}:\n"
+                                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return proc.stdout + proc.stderr
 
 

@@ -1,0 +1,26 @@
+"""DVC stage: check what every later stage reads from outside the data, before `dvc repro` runs (and so removes the
+outputs of) any of them: params.yaml is valid, and the tracking store (MLFLOW_TRACKING_URI, or the workspace's
+mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place.
+
+The file it writes says only that the check passed, the same bytes whatever the params: a later stage depends on it
+for the order of the DAG, and is rerun for its own params, never for this file."""
+
+from lfdt import mlflow_runs, stage
+from lfdt.reach import redact
+
+PASSED = "params and tracking store checked (stages/preflight.py)\n"
+"""The whole of the output: constant, so that no stage downstream reruns because this one did."""
+
+
+def run() -> None:
+    args = stage.parser(__doc__, {"out": "the file that says the checks passed"}).parse_args()
+    stage.params(args.params)
+    uri = mlflow_runs.tracking_uri()
+    mlflow_runs.check_tracking_uri(uri)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(PASSED)
+    print(f"preflight: {args.params} valid; tracking store {redact(uri)} usable")
+
+
+if __name__ == "__main__":
+    stage.main(run)
