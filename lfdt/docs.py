@@ -254,7 +254,23 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
     return f"{sum(vals) / len(vals):.4g}" if vals else "–"
 
 
+def load_test(root: Path) -> str:
+    """What the load test found (reports/load.json, written by tools/load_test.py)."""
+    d = _read_json(root / "reports" / "load.json")
+    runs = f"{d['runs_found']} of {d['runs_logged']}"
+    rows = f"{d['metric_rows_found']:,} of {d['metric_rows_logged']:,}"
+    verdict = ("lost nothing" if not d["problems"] else
+               f"**lost data** ({len(d['problems'])} problems, e.g. {d['problems'][0].splitlines()[0]})")
+    return (f"Load test (`python tools/load_test.py`): {d['sweeps']} sweeps at once, each {d['points_per_sweep']} "
+            f"points of {d['workers_per_point']} stage processes at once ({d['metrics_per_run']} metric curves of "
+            f"{d['steps_per_metric']} steps per run) on one sqlite store, while the MLflow UI served "
+            f"{d['ui_requests']} runs-table and chart requests, {verdict}: {runs} runs and {rows} metric rows in the "
+            f"store; the UI answered with {d['ui_errors']} errors, median {d['ui_p50_ms']:.0f} ms, 95th percentile "
+            f"{d['ui_p95_ms']:.0f} ms. {d['wall_s']:.0f} s on {d['cpu_model']} with {d['cores']} cores, {d['date']}.")
+
+
 BLOCKS: dict[str, Callable[[Path], str]] = {
+    "load_test": load_test,
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
     "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,

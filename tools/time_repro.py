@@ -38,7 +38,7 @@ def main() -> None:
     with args.log.open("w") as log:
         if args.clone:
             work = Path(tempfile.mkdtemp(prefix="lfdt-clone-")) / "lfdt"
-            subprocess.run(["git", "clone", "-q", str(ROOT), str(work)], check=True)
+            subprocess.run(["git", "clone", "-q", "--", str(ROOT), str(work)], check=True)
             t0 = time.perf_counter()
             subprocess.run(["make", "setup"], cwd=work, stdout=log, stderr=subprocess.STDOUT, check=True, env=env)
             setup_s = time.perf_counter() - t0
