@@ -366,40 +366,6 @@ def test_second_repro_does_nothing_and_param_change_reruns_only_dependents(proje
     assert ran == {"preflight", "track_demos@3", "bc_evaluate@lfdt_track-3", "report", "register_policies"}
 
 
-def _outputs(dst: Path) -> dict[str, bytes]:
-    """Every file of the Table I policies and of the demonstrations: what a failed repro must leave in place."""
-    files = [f for d in ("models/bc", "data/demos") for f in sorted((dst / d).rglob("*")) if f.is_file()]
-    assert files
-    return {f.relative_to(dst).as_posix(): f.read_bytes() for f in files}
-
-
-@pytest.mark.parametrize(("change", "uri", "says"), [
-    ({"bc": {"iterations": 0}}, None, "bc.iterations = 0"),
-    ({"track": {"gain": 0.7}}, "ftp://tracking.invalid/", "MLFLOW_TRACKING_URI=ftp://tracking.invalid/"),
-], ids=["bad-param", "bad-tracking-uri"])
-def test_a_bad_input_stops_repro_before_any_output_is_removed(project, change, uri, says):
-    """DVC removes a stage's outputs before it runs the stage: the preflight stage, upstream of every stage that reads
-    params, fails first on a bad params value or tracking store, and nothing else runs or loses its outputs. The
-    preflight's own output is restored by `dvc checkout` (README, "When a stage fails")."""
-    dst, _ = project
-    original = (dst / "params.yaml").read_text()
-    before = _outputs(dst)
-    params = yaml.safe_load(original)
-    for section, values in change.items():
-        params[section].update(values)
-    try:
-        (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-        out = _dvc(["repro"], dst, fails=True, tracking_uri=uri)
-    finally:
-        (dst / "params.yaml").write_text(original)
-    ran = [line.split("'")[1] for line in out.splitlines() if line.startswith("Running stage")]
-    assert ran == ["preflight"], out[-2000:]
-    assert says in out, out[-2000:]
-    assert _outputs(dst) == before
-    _dvc(["checkout", "preflight"], dst)
-    assert json.loads(_dvc(["status", "--json"], dst)) == {}
-
-
 def _runs_in(db: Path) -> list[dict]:
     import sqlite3
 
