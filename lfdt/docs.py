@@ -255,18 +255,21 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
 
 
 def load_test(root: Path) -> str:
-    """What the load test found (reports/load.json, written by tools/load_test.py)."""
-    d = _read_json(root / "reports" / "load.json")
-    runs = f"{d['runs_found']} of {d['runs_logged']}"
-    rows = f"{d['metric_rows_found']:,} of {d['metric_rows_logged']:,}"
-    verdict = ("lost nothing" if not d["problems"] else
-               f"**lost data** ({len(d['problems'])} problems, e.g. {d['problems'][0].splitlines()[0]})")
-    return (f"Load test (`python tools/load_test.py`): {d['sweeps']} sweeps at once, each {d['points_per_sweep']} "
-            f"points of {d['workers_per_point']} stage processes at once ({d['metrics_per_run']} metric curves of "
-            f"{d['steps_per_metric']} steps per run) on one sqlite store, while the MLflow UI served "
-            f"{d['ui_requests']} runs-table and chart requests, {verdict}: {runs} runs and {rows} metric rows in the "
-            f"store; the UI answered with {d['ui_errors']} errors, median {d['ui_p50_ms']:.0f} ms, 95th percentile "
-            f"{d['ui_p95_ms']:.0f} ms. {d['wall_s']:.0f} s on {d['cpu_model']} with {d['cores']} cores, {d['date']}.")
+    """What the load test found on each store (reports/load.json, written by tools/load_test.py)."""
+    docs = _read_json(root / "reports" / "load.json")
+    first = next(iter(docs.values()))
+    lines = [f"Load test (`python tools/load_test.py`): {first['sweeps']} sweeps at once, each "
+             f"{first['points_per_sweep']} points of {first['workers_per_point']} stage processes at once "
+             f"({first['metrics_per_run']} metric curves of {first['steps_per_metric']} steps per run), while the "
+             f"MLflow UI serves runs-table and chart requests; {first['cpu_model']} with {first['cores']} cores, "
+             f"{first['date']}.", "", "| store | runs in the store | metric rows in the store | lost | UI requests "
+             "| UI errors | UI median / 95th percentile | wall |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for d in docs.values():
+        lost = "nothing" if not d["problems"] else f"**{len(d['problems'])} problems**"
+        lines.append(f"| {d['how']} | {d['runs_found']} of {d['runs_logged']} | {d['metric_rows_found']:,} of "
+                     f"{d['metric_rows_logged']:,} | {lost} | {d['ui_requests']} | {d['ui_errors']} | "
+                     f"{d['ui_p50_ms']:.0f} / {d['ui_p95_ms']:.0f} ms | {d['wall_s']:.0f} s |")
+    return "\n".join(lines)
 
 
 BLOCKS: dict[str, Callable[[Path], str]] = {

@@ -1,6 +1,6 @@
 """The load test (tools/load_test.py) on a small budget: four sweeps' stage processes and the MLflow UI at once on
-one sqlite store lose no run, param or metric row, and the UI answers every request; the count it makes finds a
-row that is missing."""
+one sqlite store, two sweeps writing it directly and two through the MLflow server, lose no run, param or metric
+row, and the UI answers every request; the count it makes finds a row that is missing."""
 
 import sqlite3
 import sys
@@ -17,8 +17,9 @@ SIZE = {"sweeps": 4, "points": 1, "workers": 2, "metrics": 4, "steps": 50}
 
 @pytest.fixture(scope="module")
 def loaded(tmp_path_factory):
+    """(its folder, the report) of a small load test, both ways of reaching the store at once."""
     work = tmp_path_factory.mktemp("load")
-    return work, load_test.load_test(**SIZE, timeout=400, workdir=work)
+    return work, load_test.load_test(**SIZE, timeout=400, workdir=work, store="mixed")
 
 
 def test_four_sweeps_and_the_ui_lose_nothing(loaded):

@@ -7,14 +7,15 @@ its points ``--workers`` stage processes at once, each a stage run of the projec
 metric curve through the buffered :class:`~lfdt.mlflow_runs.Tracker`), and at the end the children adopted by the
 parent (:func:`~lfdt.mlflow_runs.adopt_children`). There is no training: only the store is loaded. Meanwhile the
 MLflow UI (``mlflow ui`` on 127.0.0.1, as ``make mlflow-ui`` starts it) serves the requests its runs table and
-metric charts make, as fast as it answers.
+metric charts make, as fast as it answers. With ``--store server`` the stages log through that server instead of
+writing the database themselves, as when a team shares one.
 
 The counts are made afterwards on the database itself (sqlite), not through MLflow. Every process is started in a
 session of its own and stopped by process group, also when the test fails; the whole test is bounded by
 ``--timeout``.
 
-    python tools/load_test.py                    # 4 sweeps, writes reports/load.json (README figures: make docs)
-    python tools/load_test.py --sweeps 2 --points 1 --steps 50 --out /tmp/load.json
+    python tools/load_test.py                    # 4 sweeps on each store, reports/load.json (README: make docs)
+    python tools/load_test.py --store server --sweeps 2 --points 1 --steps 50 --out /tmp/load.json
 """
 
 from __future__ import annotations
@@ -192,15 +193,25 @@ def count(db: Path, sweeps: int, points: int, workers: int, metrics: int, steps:
             "problems": problems}
 
 
+STORES = {"sqlite": "the stages write the sqlite database themselves while `mlflow ui` reads it (one machine)",
+          "server": "the stages log through the MLflow server that also serves the UI (a team's shared server)",
+          "mixed": "every other sweep logs through that server, the rest write the database (both at once)"}
+"""How the sweeps reach the store."""
+
+
 def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int = 8, steps: int = 500,
-              timeout: float = 900, workdir: Path | None = None) -> dict:
-    """Run the load test in ``workdir`` (a new temporary folder by default); returns its report (``problems`` empty
-    when nothing was lost)."""
+              timeout: float = 900, workdir: Path | None = None, store: str = "sqlite") -> dict:
+    """Run the load test in ``workdir`` (a new temporary folder by default) with the sweeps reaching the store as
+    ``store`` says (:data:`STORES`); returns its report (``problems`` empty when nothing was lost)."""
     from lfdt import numerics
 
+    if store not in STORES:
+        raise ValueError(f"store {store!r}: one of {sorted(STORES)}")
     workdir = Path(workdir or tempfile.mkdtemp(prefix="lfdt-load-"))
     workdir.mkdir(parents=True, exist_ok=True)
     db = workdir / "mlflow.db"
+    port = _free_port()
+    url = f"http://127.0.0.1:{port}"
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{db}", "LFDT_MLFLOW_EXPERIMENT": EXPERIMENT,
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
     # the store and the experiment exist before the UI opens the database (as after a first `dvc repro`)
@@ -208,12 +219,12 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
                    env=env, check=True, capture_output=True, timeout=300)
     with sqlite3.connect(db) as con:
         exp_id = con.execute("SELECT experiment_id FROM experiments WHERE name = ?", (EXPERIMENT,)).fetchone()[0]
-    port = _free_port()
-    url = f"http://127.0.0.1:{port}"
+    through_server = {s for s in range(sweeps) if store == "server" or (store == "mixed" and s % 2)}
     log = workdir / "mlflow-ui.log"
     procs: list[subprocess.Popen] = []
     with open(log, "ab") as fh:
-        procs.append(subprocess.Popen([str(Path(sys.executable).parent / "mlflow"), "ui", "--backend-store-uri",
+        procs.append(subprocess.Popen([str(Path(sys.executable).parent / "mlflow"),
+                                       "server" if through_server else "ui", "--backend-store-uri",
                                        f"sqlite:///{db}", "--host", "127.0.0.1", "--port", str(port)],
                                       stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                       start_new_session=True, env=env))
@@ -229,7 +240,8 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
             sweeps_procs.append(subprocess.Popen(
                 [sys.executable, __file__, "--role", "sweep", "--sweep", str(s), "--points", str(points),
                  "--workers", str(workers), "--metrics", str(metrics), "--steps", str(steps)],
-                stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True, env=env))
+                stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
+                env={**env, "MLFLOW_TRACKING_URI": url} if s in through_server else env))
         procs += sweeps_procs
         deadline = time.monotonic() + timeout
         for s, p in enumerate(sweeps_procs):
@@ -250,7 +262,8 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
     lat = sorted(ui.latencies)
     info = numerics.describe()
     report = {
-        "sweeps": sweeps, "points_per_sweep": points, "workers_per_point": workers, "metrics_per_run": metrics,
+        "store": store, "how": STORES[store], "sweeps": sweeps, "points_per_sweep": points,
+        "workers_per_point": workers, "metrics_per_run": metrics,
         "steps_per_metric": steps, **report, "problems": failed + report["problems"],
         "wall_s": round(wall, 1), "metric_rows_per_s": round(report["metric_rows_found"] / wall, 1),
         "ui_requests": len(lat), "ui_errors": len(ui.errors), "ui_error_examples": ui.errors[:3],
@@ -272,6 +285,8 @@ def main() -> None:
     ap.add_argument("--metrics", type=int, default=8, help="metric curves per stage run")
     ap.add_argument("--steps", type=int, default=500, help="steps of each curve")
     ap.add_argument("--timeout", type=float, default=900, help="seconds the sweeps may take in all")
+    ap.add_argument("--store", choices=[*STORES, "both"], default="both",
+                    help="how the sweeps reach the store: " + "; ".join(f"{k}: {v}" for k, v in STORES.items()))
     ap.add_argument("--out", type=Path, default=ROOT / "reports" / "load.json", help="where the report goes")
     ap.add_argument("--role", choices=["test", "sweep", "writer"], default="test", help=argparse.SUPPRESS)
     ap.add_argument("--sweep", type=int, default=0, help=argparse.SUPPRESS)
@@ -287,14 +302,16 @@ def main() -> None:
     if args.role == "sweep":
         _sweep(args.sweep, args.points, args.workers, args.metrics, args.steps)
         return
-    report = load_test(args.sweeps, args.points, args.workers, args.metrics, args.steps, args.timeout)
+    stores = ["sqlite", "server"] if args.store == "both" else [args.store]
+    reports = {s: load_test(args.sweeps, args.points, args.workers, args.metrics, args.steps, args.timeout, store=s)
+               for s in stores}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(json.dumps({k: v for k, v in report.items() if k != "problems"}, indent=2))
-    for p in report["problems"]:
+    args.out.write_text(json.dumps(reports, indent=2) + "\n")
+    problems = [f"{s}: {p}" for s, r in reports.items() for p in r["problems"]]
+    print(json.dumps({s: {k: v for k, v in r.items() if k != "problems"} for s, r in reports.items()}, indent=2))
+    for p in problems:
         print("LOST:", p, file=sys.stderr)
-    sys.exit(1 if report["problems"] else 0)
-
+    sys.exit(1 if problems else 0)
 
 if __name__ == "__main__":
     main()
