@@ -23,9 +23,13 @@ from lfdt.errors import StageError
 ORPHANED_EXIT = 3
 """The exit code of a process that ended because its launcher was gone."""
 POLL_S = 0.5
-LOCK_DIR = Path(tempfile.gettempdir()) / "lfdt-stage-locks"
-"""Where stages hold their locks: this machine's (a lock is named after the stage's folder and command line, and
-writes nothing into the workspace)."""
+LOCK_DIR = Path(tempfile.gettempdir()) / f"lfdt-stage-locks-{os.getuid()}"
+"""Where stages hold their locks: this machine's, this user's (a lock is named after the stage's folder and command
+line, and writes nothing into the workspace)."""
+DVC_STAGE_ENV = "DVC_STAGE"
+"""Set by DVC for every stage command it runs: a stage without it was started by hand and lives as its user says."""
+SHELLS = frozenset({"sh", "bash", "dash", "zsh", "ksh", "fish"})
+"""Programs DVC may run a stage's command through (``$SHELL -c``)."""
 LOCK_WAIT_S = 30.0
 """How long a stage waits for another copy of itself to end (an orphan ends within a second of its launcher)."""
 
@@ -51,21 +55,49 @@ def _cmdline(pid: int) -> list[str]:
 
 
 def _start_time(pid: int) -> str | None:
+    """When ``pid`` started (clock ticks after boot), or None when it is gone or has died and waits to be reaped (a
+    zombie: a launcher killed while its stage still holds its output pipe stays one until the stage ends)."""
     try:
         with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[19]
-    except (OSError, IndexError):
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except OSError:
         return None
+    if len(fields) < 20 or fields[0] in ("Z", "X"):
+        return None
+    return fields[19]
 
 
-def launcher() -> int:
-    """The process whose death should end this one: the nearest `dvc` above it (the shell DVC starts a stage through
-    may stay alive without it), else the parent."""
-    for pid in _ancestors(os.getpid()):
-        args = _cmdline(pid)
-        if any(Path(a).name == "dvc" for a in args[:3]) or args[1:3] == ["-m", "dvc"]:
+def _is_dvc(args: list[str]) -> bool:
+    return any(Path(a).name == "dvc" for a in args[:3]) or args[1:3] == ["-m", "dvc"]
+
+
+ORPHANED = 0
+"""What :func:`launcher_in` says when the `dvc` that started this process is already gone."""
+
+
+def launcher_in(chain: list[tuple[int, list[str]]], parent: int) -> int:
+    """The launcher to watch among the ``(pid, command line)`` of this process's ancestors, nearest first, for a
+    process DVC started: the nearest `dvc`; else :data:`ORPHANED` when only shells (and init) lie between this process
+    and init, as when the `dvc` that started it died while it was starting; else ``parent`` (another program ran DVC
+    through its Python API)."""
+    for pid, args in chain:
+        if _is_dvc(args):
             return pid
-    return os.getppid()
+    if all(Path((args or ["?"])[0]).name.lstrip("-") in SHELLS for pid, args in chain if pid > 1):
+        return ORPHANED
+    return parent
+
+
+def launcher() -> int | None:
+    """The process whose death should end this one (:func:`launcher_in`; an orphan exits at once), or None when none
+    should: a process DVC did not start (``DVC_STAGE`` unset: by hand, or a test calling a stage in-process) lives as
+    its user says."""
+    if DVC_STAGE_ENV not in os.environ:
+        return None
+    pid = launcher_in([(p, _cmdline(p)) for p in _ancestors(os.getpid())], os.getppid())
+    if pid == ORPHANED:
+        _orphaned()
+    return pid
 
 
 _CLEANUPS: list = []
@@ -76,25 +108,38 @@ def on_orphaned(fn) -> None:
     _CLEANUPS.append(fn)
 
 
-def watch(pid: int | None = None) -> int:
-    """End this process (exit code :data:`ORPHANED_EXIT`) within a second of ``pid``'s death (default
-    :func:`launcher`); returns the pid watched. A daemon thread: nothing to stop."""
-    pid = pid or launcher()
-    born = _start_time(pid)
+def _orphaned() -> None:
+    """Run the clean-ups (one second in all), then end this process with :data:`ORPHANED_EXIT`."""
+    done = threading.Thread(target=lambda: [fn() for fn in list(_CLEANUPS)], daemon=True)
+    done.start()
+    done.join(1.0)
+    os._exit(ORPHANED_EXIT)
 
-    def alive() -> bool:
-        return _start_time(pid) == born and born is not None  # a reused pid starts at another time
+
+_WATCHED: set[int] = set()
+
+
+def watch(pid: int | None = None) -> int | None:
+    """End this process (exit code :data:`ORPHANED_EXIT`) within a second of ``pid``'s death; returns the pid
+    watched. Without ``pid``, :func:`launcher` says which (None: nothing is watched). A given ``pid`` that is already
+    gone ends this process at once (a worker whose stage ended while it started). A daemon thread: nothing to stop;
+    a second call for the same pid adds none."""
+    pid = pid if pid is not None else launcher()
+    if pid is None or pid <= 1:
+        return None
+    born = _start_time(pid)
+    if born is None:
+        _orphaned()
+    if pid in _WATCHED:
+        return pid
+    _WATCHED.add(pid)
 
     def loop() -> None:
-        while alive():
+        while _start_time(pid) == born:  # a reused pid starts at another time
             time.sleep(POLL_S)
-        done = threading.Thread(target=lambda: [fn() for fn in list(_CLEANUPS)], daemon=True)
-        done.start()
-        done.join(1.0)
-        os._exit(ORPHANED_EXIT)
+        _orphaned()
 
-    if pid > 1 and born is not None:
-        threading.Thread(target=loop, daemon=True, name="exit-with-launcher").start()
+    threading.Thread(target=loop, daemon=True, name="exit-with-launcher").start()
     return pid
 
 

@@ -71,6 +71,8 @@ SQLITE_HEADER = b"SQLite format 3\x00"
 """The first 16 bytes of every SQLite database file."""
 DB_SCHEMES = ("postgresql", "postgres", "mysql", "mssql")
 """Database servers MLflow's SQL store talks to (``<scheme>[+driver]://...``), besides sqlite."""
+DATABRICKS = ("databricks", "databricks-uc", "uc")
+"""Tracking URIs of Databricks (bare, or ``databricks://<profile>``): MLflow's client finds their host itself."""
 
 
 def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
@@ -83,6 +85,8 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
     * ``http(s)://``: the server answers on /health within ``timeout`` seconds;
     * anything else (``file:`` stores, ``ftp://``, a mistyped scheme): refused, naming the schemes that work.
     """
+    if uri.lower() in DATABRICKS:
+        return  # MLflow's own spelling of a Databricks workspace (its CLI profile): no address to check here
     scheme = uri.split("://", 1)[0].lower() if "://" in uri else ""
     base = scheme.split("+")[0]
     if base in ("http", "https"):
@@ -91,7 +95,7 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
         _check_sqlite(uri)
     elif base in DB_SCHEMES:
         _check_database(uri, timeout)
-    elif base not in ("databricks", "databricks-uc", "uc"):
+    elif base not in DATABRICKS:
         raise TrackingUnavailable(
             f"MLFLOW_TRACKING_URI={redact(uri)}: {'a file store' if base in ('', 'file') else f'scheme {scheme!r}'} "
             "is not a tracking store the stages can use; use sqlite:////absolute/path/mlflow.db, "
@@ -99,15 +103,23 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
 
 
 def _check_server(uri: str, timeout: float) -> None:
+    import ssl
     import urllib.error
     import urllib.request
+    from urllib.parse import urlsplit, urlunsplit
 
+    parts = urlsplit(uri)
+    # user:password@ is MLflow's basic auth, not part of the address urllib connects to
+    netloc = parts.netloc.rsplit("@", 1)[-1]
+    probe = urlunsplit((parts.scheme, netloc, parts.path.rstrip("/") + "/health", "", ""))
     try:
-        urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=timeout).close()
+        urllib.request.urlopen(probe, timeout=timeout).close()
     except urllib.error.HTTPError:
         return  # something answers (a proxy or another server version): let MLflow's client take it from here
     except (urllib.error.URLError, OSError, ValueError) as e:
         reason = getattr(e, "reason", e)
+        if isinstance(reason, ssl.SSLError):
+            return  # something answers over TLS; MLflow's client checks the certificate its own way (its CA settings)
         raise TrackingUnavailable(f"the MLflow tracking server MLFLOW_TRACKING_URI={redact(uri)} does not answer "
                                   f"within {timeout:g} s ({reason}); start it, or unset MLFLOW_TRACKING_URI to use "
                                   f"{workspace_root() / 'mlflow.db'}") from None
@@ -117,13 +129,19 @@ def _check_sqlite(uri: str) -> None:
     if "?" in uri:
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: a query string is not supported (MLflow would open "
                                   "another, empty store); give the database's path alone, sqlite:////path/mlflow.db")
-    path = Path(uri.split("://", 1)[1][1:] or ".")  # sqlite:///rel and sqlite:////abs
+    from urllib.parse import unquote
+
+    # sqlite:///rel and sqlite:////abs; %20 and the like decoded, as SQLAlchemy reads them
+    path = Path(unquote(uri.split("://", 1)[1][1:]) or ".")
     if str(path) in (".", ":memory:"):
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: an in-memory store keeps no run; give a file, "
                                   "sqlite:////path/mlflow.db")
     folder = path.parent
     if not folder.is_dir():
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: the folder {folder} does not exist")
+    if path.is_dir():
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: {path} is a folder; name the database file in it, "
+                                  f"sqlite:///{path / 'mlflow.db'}")
     if path.exists():
         with open(path, "rb") as fh:
             head = fh.read(len(SQLITE_HEADER))
@@ -141,12 +159,15 @@ def _check_database(uri: str, timeout: float) -> None:
     from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 
     try:
-        dialect = make_url(uri).get_dialect()
+        url = make_url(uri)
+        dialect = url.get_dialect()
         dialect.import_dbapi()
     except (ArgumentError, NoSuchModuleError, ImportError) as err:
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={redact(uri)}: its database driver cannot be loaded "
                                   f"({type(err).__name__}: {err}); install it (e.g. pip install psycopg2-binary for "
                                   "postgresql://) or name an installed one (postgresql+psycopg2://...)") from None
+    if url.host is None or (dialect.driver == "pyodbc" and url.database is None):
+        return  # a local socket (postgresql:///db) or an ODBC data source name: no host:port to try
     try:
         check(uri, "the MLflow tracking database (MLFLOW_TRACKING_URI)", timeout=timeout)
     except Unreachable as err:

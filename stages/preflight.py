@@ -1,6 +1,8 @@
 """DVC stage: check what every later stage reads from outside the data, before `dvc repro` runs (and so removes the
 outputs of) any of them: params.yaml is valid, and the tracking store (MLFLOW_TRACKING_URI, or the workspace's
-mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place.
+mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place. DVC runs
+it when params.yaml or its code changes (and with -f); it tracks no environment variable, so a new
+MLFLOW_TRACKING_URI alone is checked by each stage as it starts.
 
 The file it writes says only that the check passed, the same bytes whatever the params: a later stage depends on it
 for the order of the DAG, and is rerun for its own params, never for this file."""

@@ -118,6 +118,8 @@ CASES = {
                        {"MLFLOW_TRACKING_URI": "file:///proc/mlruns"}),
     "store-no-driver": Case("stages/collect_random.py", _store, "its database driver cannot be loaded",
                             {"MLFLOW_TRACKING_URI": "postgresql+pg8000://lfdt:secret@127.0.0.1:5/mlflow"}),
+    "store-sqlite-folder": Case("stages/collect_random.py", _store, "{case} is a folder; name the database file",
+                                {"MLFLOW_TRACKING_URI": "sqlite:///{case}"}),
     "store-sqlite-query": Case("stages/collect_random.py", _store, "a query string is not supported",
                                {"MLFLOW_TRACKING_URI": "sqlite:////tmp/mlflow.db?mode=ro"}),
     "store-corrupt-sqlite": Case("stages/collect_random.py", _store, f"{{case}}/{CORRUPT_DB} is not an SQLite "

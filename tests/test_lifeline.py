@@ -88,7 +88,10 @@ def _processes_of(root: Path) -> list[int]:
     return out
 
 
-def test_a_killed_repro_takes_its_stage_and_workers_down(tmp_path):
+@pytest.mark.parametrize("reaped", [True, False], ids=["reaped", "zombie"])
+def test_a_killed_repro_takes_its_stage_and_workers_down(tmp_path, reaped):
+    """``reaped``: the killed `dvc repro` is waited for at once (a shell's job); else it stays a zombie while its
+    stage still holds its output pipe, as under a program that reads that pipe to its end (the sweep's chains)."""
     root = _project(tmp_path / "p")
     env = _env(root, sleep=120)
     repro = subprocess.Popen([sys.executable, "-m", "dvc", "repro"], cwd=root, env=env, stdout=subprocess.PIPE,
@@ -100,7 +103,8 @@ def test_a_killed_repro_takes_its_stage_and_workers_down(tmp_path):
             time.sleep(0.1)
         assert len(_processes_of(root)) >= 4  # dvc, the stage, two workers (and a shell, a resource tracker)
         repro.kill()  # SIGKILL to `dvc repro` alone, not its group: nothing else is told
-        repro.wait()
+        if reaped:
+            repro.wait()
         deadline = time.time() + 10
         while _processes_of(root) and time.time() < deadline:
             time.sleep(0.2)
@@ -109,6 +113,13 @@ def test_a_killed_repro_takes_its_stage_and_workers_down(tmp_path):
     finally:
         for pid in _processes_of(root):
             os.kill(pid, signal.SIGKILL)
+        repro.wait()
+
+    # the orphans marked their own runs KILLED before they went (not the rerun's clean-up of stray runs)
+    client = mlflow.MlflowClient(env["MLFLOW_TRACKING_URI"])
+    exp = client.get_experiment_by_name("lfdt").experiment_id
+    killed = sorted((r.info.run_name, r.info.status) for r in client.search_runs([exp]))
+    assert killed == [("tiny s0", "KILLED"), ("tiny s1", "KILLED")], killed
 
     # the rerun runs the stage again, whole, and gives an uninterrupted run's output
     env = _env(root, sleep=0)
@@ -120,8 +131,7 @@ def test_a_killed_repro_takes_its_stage_and_workers_down(tmp_path):
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert json.loads((root / "out.json").read_text()) == [{"seed": 0, "value": 0}, {"seed": 1, "value": 2}]
 
-    client = mlflow.MlflowClient(env["MLFLOW_TRACKING_URI"])
-    runs = client.search_runs([client.get_experiment_by_name("lfdt").experiment_id])
+    runs = client.search_runs([exp])
     status = sorted((r.info.run_name, r.info.status) for r in runs)
     assert status == [("tiny s0", "FINISHED"), ("tiny s0", "KILLED"), ("tiny s1", "FINISHED"),
                       ("tiny s1", "KILLED")], status
@@ -152,5 +162,27 @@ def test_a_second_copy_of_a_stage_waits_then_names_the_first(tmp_path):
         pass
 
 
-def test_the_watched_launcher_is_the_nearest_dvc_else_the_parent():
-    assert lifeline.launcher() == os.getppid()  # pytest was not started by dvc
+def test_a_process_dvc_did_not_start_watches_nothing(monkeypatch):
+    monkeypatch.delenv(lifeline.DVC_STAGE_ENV, raising=False)
+    assert lifeline.launcher() is None  # by hand, or in-process in a test: it lives as its user says
+    assert lifeline.watch() is None
+
+
+@pytest.mark.parametrize(("chain", "watched"), [
+    ([(40, ["/bin/sh", "-c", "python stages/x.py"]), (30, ["/venv/bin/python", "/venv/bin/dvc", "repro"]),
+      (20, ["-bash"]), (1, ["/sbin/init"])], 30),                          # dvc's script, through a shell
+    ([(30, ["python3", "-m", "dvc", "exp", "run"]), (1, ["/sbin/init"])], 30),  # python -m dvc, no shell
+    ([(40, ["/bin/sh", "-c", "python stages/x.py"]), (1, ["/sbin/init"])], lifeline.ORPHANED),  # dvc died: init
+    ([(1, ["/sbin/init"])], lifeline.ORPHANED),                            # and the shell had exec'd the stage
+    ([(40, ["/bin/sh", "-c", "x"]), (30, ["python", "notebook.py"]), (1, ["/sbin/init"])], 99),  # DVC's Python API
+], ids=["dvc-script", "python-m-dvc", "dvc-gone", "dvc-gone-no-shell", "python-api"])
+def test_the_watched_launcher_is_the_nearest_dvc_else_orphaned_else_the_parent(chain, watched):
+    assert lifeline.launcher_in(chain, parent=99) == watched
+
+
+def test_a_worker_whose_stage_is_gone_ends_at_once(tmp_path):
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    out = subprocess.run([sys.executable, "-c", f"from lfdt import lifeline; lifeline.watch({gone.pid}); "
+                          "import time; time.sleep(30)"], timeout=60)
+    assert out.returncode == lifeline.ORPHANED_EXIT

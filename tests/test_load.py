@@ -31,7 +31,7 @@ def test_four_sweeps_and_the_ui_lose_nothing(loaded):
     assert report["ui_errors"] == 0, report["ui_error_examples"]
 
 
-def test_the_count_finds_a_lost_row_and_a_stray_run(loaded):
+def test_the_count_finds_a_lost_row_an_unfinished_run_and_a_stray_one(loaded):
     work, _ = loaded
     db = work / "mlflow.db"
     with sqlite3.connect(db) as con:
@@ -41,7 +41,11 @@ def test_the_count_finds_a_lost_row_and_a_stray_run(loaded):
                     (run,))
         con.execute("UPDATE runs SET status = 'RUNNING' WHERE name = ?",
                     (load_test.CHILD.format(sweep=0, point=0, worker=0),))
+        con.execute("UPDATE runs SET name = 'stray' WHERE name = ?", (load_test.PARENT.format(sweep=3),))
     problems = load_test.count(db, **SIZE)["problems"]
+    assert any(p.startswith("stray: 1 runs nobody logged") for p in problems), problems
+    assert any(p.startswith(load_test.PARENT.format(sweep=3) + ": runs []") for p in problems), problems
+    problems = [p for p in problems if "sweep 3" not in p and not p.startswith("stray")]
     assert len(problems) == 2, problems
     assert "sweep 2 point 0 worker 1: 199 metric rows" in problems[0] + problems[1]
     assert any("sweep 0 point 0 worker 0: runs" in p and "RUNNING" in p for p in problems)

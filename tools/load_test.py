@@ -188,6 +188,11 @@ def count(db: Path, sweeps: int, points: int, workers: int, metrics: int, steps:
                                       (uuid,)).fetchone()
                     if parents[s] and (tag is None or tag[0] != parents[s][0][0]):
                         problems.append(f"{name}: not a child of its sweep's run")
+        expected = {PARENT.format(sweep=s) for s in range(sweeps)} | {
+            CHILD.format(sweep=s, point=p, worker=w) for s in range(sweeps) for p in range(points)
+            for w in range(workers)}
+        problems += [f"{name}: {len(found)} runs nobody logged" for name, found in sorted(runs.items())
+                     if name not in expected]
     return {"runs_logged": sweeps * (1 + points * workers), "runs_found": sum(len(v) for v in runs.values()),
             "metric_rows_logged": sweeps * points * workers * metrics * steps, "metric_rows_found": rows_found,
             "problems": problems}
