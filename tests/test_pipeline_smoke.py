@@ -40,8 +40,8 @@ SEEDS = (0, 1)
 
 def test_every_stage_ran(project):
     _, out = project
-    stages = ["train_experts", "collect_random", "collect_demos", "fit_dynamics", "select_demos@3", "track_demos@3",
-              "report", "twin_report", "register_policies"]
+    stages = ["preflight", "train_experts", "collect_random", "collect_demos", "fit_dynamics", "select_demos@3",
+              "track_demos@3", "report", "twin_report", "register_policies"]
     stages += [f"{s}@{t}" for s in ("twin_collect", "twin_train", "twin_evaluate")
                for t in ("block_push", "peg_insertion")]
     stages += [f"train_translator@{m}-3" for m in TRANSLATORS]
