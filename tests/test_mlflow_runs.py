@@ -1,5 +1,6 @@
 """MLflow tracking: tags and params land in the run; experiment creation is safe under concurrency."""
 
+import http.server
 import subprocess
 import sys
 import textwrap
@@ -175,7 +176,7 @@ def test_a_refused_duplicate_experiment_tag_is_fine_when_the_tag_holds(tmp_path,
         mlflow_runs.experiment_id("lfdt")
 
 
-class _Health(__import__("http.server").server.BaseHTTPRequestHandler):
+class _Health(http.server.BaseHTTPRequestHandler):
     def do_GET(self):  # noqa: N802 - http.server's name
         self.send_response(200 if self.path == "/health" else 404)
         self.end_headers()
@@ -188,7 +189,6 @@ class _Health(__import__("http.server").server.BaseHTTPRequestHandler):
 def test_tracking_uris_users_write_are_accepted(tmp_path):
     """Spellings MLflow accepts pass the check: Databricks by name, a path with %20, a database on a local socket,
     a server with basic auth in the URL (user:password@ is not part of the address)."""
-    import http.server
     import threading
 
     from lfdt import mlflow_runs

@@ -21,12 +21,9 @@ session of its own and stopped by process group, also when the test fails; the w
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import random
-import signal
-import socket
 import sqlite3
 import statistics
 import subprocess
@@ -39,6 +36,10 @@ from datetime import date
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+import services  # noqa: E402 - the tests' helpers for servers started on 127.0.0.1 and stopped by process group
+
 EXPERIMENT = "load-test"
 PARENT = "sweep {sweep}"
 CHILD = "sweep {sweep} point {point} worker {worker}"
@@ -87,26 +88,6 @@ def _sweep(sweep: int, points: int, workers: int, metrics: int, steps: int) -> N
 
 # ---- the test ----
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _stop(procs: list[subprocess.Popen]) -> None:
-    """Stop each process's whole session (it was started with ``start_new_session``): SIGTERM, then SIGKILL."""
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        for p in procs:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(p.pid, sig)
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and any(p.poll() is None for p in procs):
-            time.sleep(0.1)
-    for p in procs:
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            p.wait(timeout=5)
-
-
 class UiClient(threading.Thread):
     """Requests of the MLflow UI's runs table and charts, one after another until stopped; counts errors."""
 
@@ -139,16 +120,6 @@ class UiClient(threading.Thread):
             except Exception as err:  # noqa: BLE001 - every failed request is counted and reported, not raised
                 self.errors.append(f"{type(err).__name__}: {err}")
                 time.sleep(0.2)
-
-
-def _wait_healthy(url: str, proc: subprocess.Popen, timeout: float, log: Path) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and proc.poll() is None:
-        with contextlib.suppress(OSError):
-            urllib.request.urlopen(f"{url}/health", timeout=2).close()
-            return
-        time.sleep(0.3)
-    raise RuntimeError(f"the MLflow UI at {url} did not start:\n{log.read_text()[-2000:]}")
 
 
 def count(db: Path, sweeps: int, points: int, workers: int, metrics: int, steps: int) -> dict:
@@ -215,7 +186,7 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
     workdir = Path(workdir or tempfile.mkdtemp(prefix="lfdt-load-"))
     workdir.mkdir(parents=True, exist_ok=True)
     db = workdir / "mlflow.db"
-    port = _free_port()
+    port = services.free_port()
     url = f"http://127.0.0.1:{port}"
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{db}", "LFDT_MLFLOW_EXPERIMENT": EXPERIMENT,
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
@@ -236,7 +207,8 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
     ui = UiClient(url, str(exp_id))
     failed: list[str] = []
     try:
-        _wait_healthy(url, procs[0], 120, log)
+        services.wait_for(lambda: urllib.request.urlopen(f"{url}/health", timeout=2).close() is None,
+                          f"the MLflow UI at {url}", procs[0], timeout=120, log=log)
         ui.start()
         start = time.perf_counter()
         sweeps_procs = []
@@ -262,7 +234,7 @@ def load_test(sweeps: int = 4, points: int = 3, workers: int = 2, metrics: int =
     finally:
         ui.done.set()
         ui.join(timeout=60)
-        _stop(procs)
+        services.stop_all(procs)
     report = count(db, sweeps, points, workers, metrics, steps)
     lat = sorted(ui.latencies)
     info = numerics.describe()
