@@ -84,6 +84,9 @@ class SuccessConfig(Strict):
     """Absolute box yaw below this, rad."""
     speed: PosFloat = 0.02
     """Box speed below this (at rest), m/s."""
+    path_yaw_margin: PosFloat = 0.05
+    """Path rule, reported beside the end-state rule: the box's |yaw| never exceeds max(|start yaw|, yaw) plus this
+    along the episode, rad (the paper's task asks to push 'while avoiding the rotation of the box')."""
 
 
 class RewardConfig(Strict):

@@ -192,3 +192,65 @@ def test_action_rate_penalty_is_the_change_of_command():
     # the first command changes from rest (zero), the second from the first
     assert rewards[0][0] - rewards[1][0] == pytest.approx(2.0 * float(a1 @ a1))
     assert rewards[0][1] - rewards[1][1] == pytest.approx(2.0 * float((a2 - a1) @ (a2 - a1)))
+
+
+def test_path_rule_fails_an_episode_whose_box_turned_on_the_way():
+    """The end-state rule sees only the last step; the path rule also remembers how far the box turned on the way,
+    against a limit of max(|start yaw|, success.yaw) + success.path_yaw_margin."""
+    scene = BoxPushModel("Y", CFG)
+    s = CFG.success
+    gx, gy = CFG.box.goal
+    env = BoxPushEnv("Y", CFG)
+    for start_yaw, detour, allowed in ((0.0, s.yaw + 1.5 * s.path_yaw_margin, False),
+                                       (0.0, s.yaw + 0.5 * s.path_yaw_margin, True),
+                                       (-0.22, 0.22 + 0.5 * s.path_yaw_margin, True),
+                                       (-0.22, 0.22 + 1.5 * s.path_yaw_margin, False)):
+        env.reset(seed=0)
+        qpos = env.data.qpos.copy()
+        qpos[scene.box_qpos] = [0.0, 0.22, start_yaw]
+        env.set_state(qpos)
+        assert env._info()["max_abs_yaw"] == pytest.approx(abs(start_yaw))
+        env.data.qpos[scene.box_qpos.start + 2] = detour  # the box turned on the way
+        mujoco.mj_forward(env.model, env.data)
+        assert not env._info()["is_path_success"]  # not at the goal yet
+        env.data.qpos[scene.box_qpos] = [gx, gy, 0.0]  # then arrived straight and at rest
+        mujoco.mj_forward(env.model, env.data)
+        info = env._info()
+        assert info["is_success"], "the end-state rule does not look at the way"
+        assert info["is_path_success"] is allowed, (start_yaw, detour)
+        assert info["max_abs_yaw"] == pytest.approx(detour)
+    # a new episode forgets the last one's detour
+    env.reset(seed=0)
+    assert env._info()["max_abs_yaw"] <= CFG.box.start_noise_yaw
+
+
+def test_a_late_arm_that_catches_up_passes_the_end_state_rule_only():
+    """Both arms push the same distance, one starting late: the box turns on the way, then mostly straightens (what
+    two robots' programs of different timing do together): the end-state rule counts it, the path rule does not.
+    Starting one step late instead stays within the path rule's margin."""
+    from lfdt.tasks.box_push.env import jacobian
+
+    def push(late_steps: int) -> dict:
+        env = BoxPushEnv("Y", QUIET)
+        n1 = env.scene.nq_arm[0]
+        slots = (slice(0, n1), slice(n1, 2 * n1))
+        env.reset(seed=0)
+        end_y = [forward_kinematics(arm, env.data.qpos[sl])[1] + 0.12 for arm, sl in zip(env.scene.arms, slots)]
+        for t in range(QUIET.max_episode_steps):
+            u = []
+            for i, (arm, sl) in enumerate(zip(env.scene.arms, slots)):
+                q = env.data.qpos[sl]
+                ee = forward_kinematics(arm, q)
+                vy = 0.0 if (i == 1 and t < late_steps) else float(np.clip(4.0 * (end_y[i] - ee[1]), -0.1, 0.1))
+                u.append(np.asarray(arm.cfg.damping) * (np.linalg.pinv(jacobian(arm, q)) @ np.array([0.0, vy]))
+                         / np.asarray(arm.cfg.gears))
+            _, _, term, trunc, info = env.step(np.clip(np.concatenate(u), -1, 1))
+            if term or trunc:
+                return info
+        return info
+
+    late = push(5)
+    assert late["is_success"] and not late["is_path_success"]
+    assert late["max_abs_yaw"] > QUIET.success.yaw + QUIET.success.path_yaw_margin
+    in_step = push(1)
+    assert in_step["is_success"] and in_step["is_path_success"]

@@ -141,11 +141,14 @@ def test_second_half_artifacts(project):
     per_seed = len(TRANSLATORS) + 1 + 2 * len(METHODS)  # translators, re-execution, BC and evaluation
     assert rep["mlflow_child_runs"] == 2 + 3 + 2 + 1 + per_seed * len(SEEDS)  # every run behind the table
     headline = json.loads((dst / "reports/table1.json").read_text())
-    assert set(headline) == set(METHODS) and all(set(v) == {"d3"} for v in headline.values())
+    assert set(headline) == set(METHODS) and all(set(v) == {"d3", "d3_path"} for v in headline.values())
     rows = {r.split(",")[0]: r.split(",") for r in table[1:]}
     header = table[0].split(",")
     for m in METHODS:
         assert headline[m]["d3"] == round(float(rows[m][header.index("success_rate")]), 4)
+        assert headline[m]["d3_path"] == round(float(rows[m][header.index("path_success_rate")]), 4)
+        # the path rule asks more than the end-state rule: never more successes
+        assert int(rows[m][header.index("path_successes")]) <= int(rows[m][header.index("successes")])
 
 
 def test_metrics_hold_no_bookkeeping(project):

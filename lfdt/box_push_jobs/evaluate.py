@@ -43,8 +43,10 @@ def evaluate_job(cfgs: list[Config], progress: Progress | None = None) -> list[d
         results = []
         for cfg, run, trials in zip(cfgs, runs, all_trials):
             ok = np.array([t["success"] for t in trials])
+            path_ok = np.array([t["path_success"] for t in trials])
             summary = {**cfg.tags(), "start_states": ecfg.start_states, "successes": int(ok.sum()),
                        "trials": len(trials), "success_rate": float(ok.mean()),
+                       "path_success_rate": float(path_ok.mean()),
                        f"success_rate_first{evaluation.PAPER_TRIALS}": float(ok[:evaluation.PAPER_TRIALS].mean()),
                        "mean_final_box_distance_m": float(np.mean([t["final_box_distance_m"] for t in trials])),
                        "mean_final_yaw_error_rad": float(np.mean([t["final_yaw_error_rad"] for t in trials])),
@@ -53,8 +55,8 @@ def evaluate_job(cfgs: list[Config], progress: Progress | None = None) -> list[d
             if ecfg.videos:
                 run.artifact(cfg.dir(cfg.videos_dir), "videos")
             rows = [{"method": cfg.method, "demos": cfg.demos, "seed": cfg.seed, "start_states": ecfg.start_states,
-                     "trial": t["trial"], "start_seed": t["seed"], "success": bool(t["success"]), "steps": t["steps"],
-                     "final_box_distance_m": t["final_box_distance_m"], "final_yaw_error_rad": t["final_yaw_error_rad"]}
+                     "trial": t["trial"], "start_seed": t["seed"], "success": bool(t["success"]), "path_success": bool(t["path_success"]),
+                     "steps": t["steps"], "max_abs_yaw_rad": t["max_abs_yaw_rad"], "final_box_distance_m": t["final_box_distance_m"], "final_yaw_error_rad": t["final_yaw_error_rad"]}
                     for t in trials]
             results.append({"metrics": summary, "trials": rows})
     return results
@@ -76,5 +78,7 @@ def box_push_trials(act, policies: int, env_cfg: EnvConfig, trials: int, videos:
     for per_policy in results:
         for r in per_policy:
             info = r.pop("final_info")
-            r.update({"final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
+            r.update({"path_success": bool(r["success"] and info["is_path_success"]),
+                      "max_abs_yaw_rad": info["max_abs_yaw"],
+                      "final_box_distance_m": info["box_distance"], "final_yaw_error_rad": abs(info["box_yaw"])})
     return results

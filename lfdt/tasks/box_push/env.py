@@ -272,6 +272,12 @@ class BoxPushModel:
         dist = np.hypot(box_pose[..., 0] - self.cfg.box.goal[0], box_pose[..., 1] - self.cfg.box.goal[1])
         return (dist < s.distance) & (np.abs(_wrap(box_pose[..., 2])) < s.yaw) & (box_speed < s.speed)
 
+    def path_yaw_limit(self, start_yaw: float | np.ndarray) -> float | np.ndarray:
+        """The most |yaw| the path rule allows along an episode that started at ``start_yaw``: the start's own
+        |yaw| or the end-state rule's threshold, whichever is larger, plus ``success.path_yaw_margin``."""
+        s = self.cfg.success
+        return np.maximum(np.abs(_wrap(start_yaw)), s.yaw) + s.path_yaw_margin
+
 
 class BoxPushEnv(gym.Env):
     """Gymnasium environment of one domain of the box push. Torque actions in [-1, 1] per joint."""
@@ -295,6 +301,8 @@ class BoxPushEnv(gym.Env):
         self._renderer: mujoco.Renderer | None = None
         self._size = (height, width)
         self._steps = 0
+        self._yaw_limit = math.inf
+        self._max_abs_yaw = 0.0
 
     # -- state helpers
     def set_state(self, qpos: np.ndarray, qvel: np.ndarray | None = None) -> np.ndarray:
@@ -304,6 +312,9 @@ class BoxPushEnv(gym.Env):
         self.data.qvel[:] = 0.0 if qvel is None else qvel
         mujoco.mj_forward(self.model, self.data)
         self._steps = 0
+        start_yaw = float(self.data.qpos[self.scene.box_qpos][2])
+        self._yaw_limit = float(self.scene.path_yaw_limit(start_yaw))
+        self._max_abs_yaw = abs(float(_wrap(start_yaw)))
         return self._obs()
 
     def _obs(self) -> np.ndarray:
@@ -318,8 +329,13 @@ class BoxPushEnv(gym.Env):
         ee = [forward_kinematics(arm, self.data.qpos[s]) for arm, s in zip(
             self.scene.arms, (slice(0, self.scene.nq_arm[0]), slice(self.scene.nq_arm[0], sum(self.scene.nq_arm))))]
         targets = self.scene.contact_targets(box)
+        self._max_abs_yaw = max(self._max_abs_yaw, abs(float(box[2])))
+        success = bool(self.scene.success(box, speed))
         return {
-            "is_success": bool(self.scene.success(box, speed)),
+            "is_success": success,
+            # the end-state rule and, along the way so far, the path rule (SuccessConfig.path_yaw_margin)
+            "is_path_success": success and self._max_abs_yaw <= self._yaw_limit,
+            "max_abs_yaw": self._max_abs_yaw,
             "box_distance": float(np.linalg.norm(box[:2] - goal)),
             "box_yaw": float(box[2]),
             "box_speed": speed,
