@@ -24,7 +24,8 @@ def toy(monkeypatch):
 def _trials(method_names: list[str]) -> pd.DataFrame:
     rng = np.random.default_rng(0)
     rows = [{"method": m, "demos": d, "seed": s, "trial": t, "start_states": "evaluation",
-             "success": bool(rng.random() < 0.5), "path_success": bool(rng.random() < 0.3), "final_box_distance_m": 0.01, "final_yaw_error_rad": 0.01}
+             "success": bool(rng.random() < 0.5), "path_success": bool(rng.random() < 0.3),
+             "final_box_distance_m": 0.01, "final_yaw_error_rad": 0.01}
             for m in method_names for d in (50, 100) for s in (3, 4) for t in range(20)]
     return pd.DataFrame(rows)
 

@@ -70,6 +70,10 @@ def main() -> None:
                          "raw subsets of the seed): what BC's own seed does")
     ap.add_argument("--baseline-from", help="pair with BC without translation of this earlier trial (same seeds, "
                                             "same start states; it does not depend on the translator's params)")
+    ap.add_argument("--demos-dir", type=Path, default=ROOT / "data/demos",
+                    help="the demonstrations (R1H.parquet, HR2.parquet): the pipeline's, or a candidate protocol's")
+    ap.add_argument("--random-dir", type=Path, default=ROOT / "data/random", help="the random motion of X and Y")
+    ap.add_argument("--dynamics-dir", type=Path, default=ROOT / "models/dynamics", help="F and F^-1 of Y")
     args = ap.parse_args()
     if set(args.seeds) & set(stage.params(ROOT / "params.yaml").grid.seeds):
         raise SystemExit("tools/dev_trial.py: the evaluation seeds (grid.seeds) are not for development")
@@ -87,8 +91,8 @@ def main() -> None:
     params_path = root / "params.yaml"
     params_path.write_text(yaml.safe_dump(doc, sort_keys=False))
     os.environ["DVC_EXP_NAME"] = f"dev-{args.name}"  # the MLflow runs' tag
-    dirs = {"demos_dir": ROOT / "data/demos", "random_dir": ROOT / "data/random",
-            "dynamics_dir": ROOT / "models/dynamics", "translators_dir": root / "translators",
+    dirs = {"demos_dir": args.demos_dir.resolve(), "random_dir": args.random_dir.resolve(),
+            "dynamics_dir": args.dynamics_dir.resolve(), "translators_dir": root / "translators",
             "bc_data_dir": root / "bc_train", "policies_dir": root / "policies", "videos_dir": root / "videos"}
     t0 = time.perf_counter()
     wanted = [methods.get(m) for m in args.methods]
@@ -136,33 +140,53 @@ def main() -> None:
             res = common.flatten(parallel.run_jobs(evaluate_job, common.groups(cfgs, p.grid.workers),
                                                    p.grid.workers, desc=f"evaluate {m.name}-d{n}", unit="trial"))
             outcomes = np.array([[t["success"] for t in r["trials"]] for r in res], dtype=float)
-            rows[(m.name, n)] = outcomes
+            path = np.array([[t["path_success"] for t in r["trials"]] for r in res], dtype=float)
+            rows[(m.name, n)] = {"": outcomes, "path_": path}
             save_outcomes(args.name, m.name, n, bc_seeds, outcomes)
-            for r, o in zip(res, outcomes):
+            save_outcomes(args.name, m.name, n, bc_seeds, path, rule="path")
+            for r, o, po in zip(res, outcomes, path):
                 diag_rows.append({"method": m.name, "demos": n, "stage": "evaluate", "seed": r["metrics"]["seed"],
-                                  "success_rate": float(o.mean())})
+                                  "success_rate": float(o.mean()), "path_success_rate": float(po.mean()),
+                                  "max_abs_yaw_median": float(np.median([t["max_abs_yaw_rad"] for t in r["trials"]]))})
             print(f"{m.name}-d{n}: {100 * outcomes.mean():.1f} % (per seed "
-                  f"{', '.join(f'{100 * x:.0f}' for x in outcomes.mean(axis=1))})", file=sys.stderr)
+                  f"{', '.join(f'{100 * x:.0f}' for x in outcomes.mean(axis=1))}); path rule "
+                  f"{100 * path.mean():.1f} % (per seed {', '.join(f'{100 * x:.0f}' for x in path.mean(axis=1))})",
+                  file=sys.stderr)
     write_results(args, rows, diag_rows, time.perf_counter() - t0)
-    print(json.dumps({f"{m}-d{n}": round(100 * o.mean(), 1) for (m, n), o in rows.items()}), file=sys.stderr)
+    print(json.dumps({f"{m}-d{n}": [round(100 * o[k].mean(), 1) for k in ("", "path_")] for (m, n), o in rows.items()}),
+          file=sys.stderr)
     if not args.keep:
         shutil.rmtree(root, ignore_errors=True)
 
+
+FIELDS = ["date", "trial", "hypothesis", "changes", "method", "demos", "seeds", "start_states", "success_pct",
+          "ci_low_pct", "ci_high_pct", "worst_seed_pct", "per_seed_pct", "diff_vs_bc_no_translation_pct",
+          "diff_ci_low_pct", "diff_ci_high_pct", "cpu_model", "numerics", "wall_min", "demos_dir", "path_success_pct",
+          "path_ci_low_pct", "path_ci_high_pct", "path_worst_seed_pct", "path_per_seed_pct",
+          "path_diff_vs_bc_no_translation_pct", "path_diff_ci_low_pct", "path_diff_ci_high_pct"]
+"""The columns of docs/experiments/trials.csv (those from demos_dir on were added with the path rule; earlier rows
+leave them empty: those trials ran on data/demos and before the rule)."""
 
 OUTCOMES = ROOT / "docs" / "experiments" / "outcomes"
 """Every trial's 0/1 outcomes, one file per (trial, method, demos): a later trial pairs with them."""
 
 
-def save_outcomes(trial: str, method: str, demos: int, seeds: list[int], outcomes: np.ndarray) -> None:
+def _outcome_file(trial: str, method: str, demos: int, rule: str) -> Path:
+    return OUTCOMES / f"{trial}_{method}-d{demos}{'' if rule == 'end' else '_' + rule}.csv"
+
+
+def save_outcomes(trial: str, method: str, demos: int, seeds: list[int], outcomes: np.ndarray,
+                  rule: str = "end") -> None:
+    """One trial's 0/1 outcomes by the end-state rule ('end') or the path rule ('path')."""
     OUTCOMES.mkdir(parents=True, exist_ok=True)
-    with (OUTCOMES / f"{trial}_{method}-d{demos}.csv").open("w") as f:
+    with _outcome_file(trial, method, demos, rule).open("w") as f:
         f.write("seed,outcomes\n")
         for s, o in zip(seeds, outcomes):
             f.write(f"{s},{''.join(str(int(x)) for x in o)}\n")
 
 
-def load_outcomes(trial: str, method: str, demos: int, seeds: list[int]) -> np.ndarray | None:
-    path = OUTCOMES / f"{trial}_{method}-d{demos}.csv"
+def load_outcomes(trial: str, method: str, demos: int, seeds: list[int], rule: str = "end") -> np.ndarray | None:
+    path = _outcome_file(trial, method, demos, rule)
     if not path.exists():
         return None
     rows = dict(line.strip().split(",") for line in path.read_text().splitlines()[1:])
@@ -185,33 +209,36 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
     out_dir = ROOT / "docs" / "experiments"
     out_dir.mkdir(parents=True, exist_ok=True)
     trials = out_dir / "trials.csv"
-    fields = ["date", "trial", "hypothesis", "changes", "method", "demos", "seeds", "start_states", "success_pct",
-              "ci_low_pct", "ci_high_pct", "worst_seed_pct", "per_seed_pct", "diff_vs_bc_no_translation_pct",
-              "diff_ci_low_pct", "diff_ci_high_pct", "cpu_model", "numerics", "wall_min"]
+    fields = FIELDS
     info = numerics.describe()
     out = []
-    for (m, n), o in rows.items():
-        lo, hi = evaluation.seed_state_interval(o)
-        per = o.mean(axis=1)
-        base = rows.get(("bc_no_translation", n))
-        if base is None and args.baseline_from:
-            base = load_outcomes(args.baseline_from, "bc_no_translation", n, args.seeds)
-        dlo = dhi = diff = ""
-        if base is not None and m != "bc_no_translation":
-            d = o - base
-            diff = f"{100 * d.mean():.1f}"
-            a, b = evaluation.paired_difference_interval(o, base)
-            dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
-        out.append({"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
-                    "changes": " ".join(args.set + ([f"BC seed = seed + {args.bc_seed_offset}"]
-                                                    if args.bc_seed_offset else [])), "method": m, "demos": n,
-                    "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
-                    "success_pct": f"{100 * o.mean():.1f}", "ci_low_pct": f"{100 * lo:.1f}",
-                    "ci_high_pct": f"{100 * hi:.1f}", "worst_seed_pct": f"{100 * per.min():.1f}",
-                    "per_seed_pct": " ".join(f"{100 * x:.1f}" for x in per),
-                    "diff_vs_bc_no_translation_pct": diff, "diff_ci_low_pct": dlo, "diff_ci_high_pct": dhi,
-                    "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"})
-    append_rows(trials, fields, [[str(r[f]) for f in fields] for r in out])  # all rows in one write
+    for (m, n), by_rule in rows.items():
+        row = {"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
+               "changes": " ".join(args.set + ([f"BC seed = seed + {args.bc_seed_offset}"]
+                                               if args.bc_seed_offset else [])), "method": m, "demos": n,
+               "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
+               "demos_dir": os.path.relpath(args.demos_dir.resolve(), ROOT),
+               "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"}
+        for pre, o in by_rule.items():
+            lo, hi = evaluation.seed_state_interval(o)
+            per = o.mean(axis=1)
+            base = rows.get(("bc_no_translation", n), {}).get(pre)
+            if base is None and args.baseline_from:
+                base = load_outcomes(args.baseline_from, "bc_no_translation", n, args.seeds,
+                                     "path" if pre else "end")
+            dlo = dhi = diff = ""
+            if base is not None and m != "bc_no_translation":
+                d = o - base
+                diff = f"{100 * d.mean():.1f}"
+                a, b = evaluation.paired_difference_interval(o, base)
+                dlo, dhi = f"{100 * a:.1f}", f"{100 * b:.1f}"
+            row.update({f"{pre}success_pct": f"{100 * o.mean():.1f}", f"{pre}ci_low_pct": f"{100 * lo:.1f}",
+                        f"{pre}ci_high_pct": f"{100 * hi:.1f}", f"{pre}worst_seed_pct": f"{100 * per.min():.1f}",
+                        f"{pre}per_seed_pct": " ".join(f"{100 * x:.1f}" for x in per),
+                        f"{pre}diff_vs_bc_no_translation_pct": diff, f"{pre}diff_ci_low_pct": dlo,
+                        f"{pre}diff_ci_high_pct": dhi})
+        out.append(row)
+    append_rows(trials, fields, [[str(r.get(f, "")) for f in fields] for r in out])  # all rows in one write
     keys = sorted({k for r in diag_rows for k in r})
     if not keys:
         return

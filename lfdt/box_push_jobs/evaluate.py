@@ -55,8 +55,10 @@ def evaluate_job(cfgs: list[Config], progress: Progress | None = None) -> list[d
             if ecfg.videos:
                 run.artifact(cfg.dir(cfg.videos_dir), "videos")
             rows = [{"method": cfg.method, "demos": cfg.demos, "seed": cfg.seed, "start_states": ecfg.start_states,
-                     "trial": t["trial"], "start_seed": t["seed"], "success": bool(t["success"]), "path_success": bool(t["path_success"]),
-                     "steps": t["steps"], "max_abs_yaw_rad": t["max_abs_yaw_rad"], "final_box_distance_m": t["final_box_distance_m"], "final_yaw_error_rad": t["final_yaw_error_rad"]}
+                     "trial": t["trial"], "start_seed": t["seed"], "success": bool(t["success"]),
+                     "path_success": bool(t["path_success"]), "steps": t["steps"],
+                     "max_abs_yaw_rad": t["max_abs_yaw_rad"], "final_box_distance_m": t["final_box_distance_m"],
+                     "final_yaw_error_rad": t["final_yaw_error_rad"]}
                     for t in trials]
             results.append({"metrics": summary, "trials": rows})
     return results
