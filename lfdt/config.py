@@ -207,6 +207,12 @@ class RandomConfig(Strict):
     to the goal (0 = the task's own start distribution)."""
     amplitude: Annotated[float, Field(gt=0, le=1)] = 1.0
     """Commands are uniform in [-amplitude, amplitude] per joint."""
+    push_fraction: Annotated[float, Field(ge=0, le=1)] = 0.0
+    """Share of the episodes whose arms push: each arm's end heads along the push direction at its own random speed,
+    start and distance, with held random commands of ``push_noise`` on top (so F sees two arms pushing the box, in
+    and out of step); the rest are the uniform commands above. 0 = none (the paper's plain random motion)."""
+    push_noise: Annotated[float, Field(ge=0, le=1)] = 0.3
+    """Amplitude of the held uniform commands added to a pushing episode's commands."""
     threads: PosInt = 2
     """Threads of the batched MuJoCo rollout."""
     episodes_per_batch: PosInt = 250
@@ -370,6 +376,10 @@ class TranslatorConfig(Strict):
     lambda_hand: NonNegFloat = 0.0
     """Weight of a hand loss: the missing robot's end position against the human's hand position (the same world
     frame, as in the paper's real-robot state), in Y's normalised units. Not in the paper (0 = off)."""
+    lambda_side: NonNegFloat = 0.0
+    """Weight of a sideways term: where the missing robot's end is across the object, in the object's own frame,
+    against where the human's hand is (Y's normalised units). Only the across coordinate: a hand and a robot's end
+    touch the rear face at different depths but at the same place along it. Not in the paper (0 = off)."""
     hidden: list[PosInt] = Field(default=[256, 256], min_length=1)
     """Hidden layers of G and D ('3 fully connected layers' = 2 hidden + output)."""
     learning_rate: PosFloat = 3e-4

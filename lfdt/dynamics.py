@@ -88,6 +88,31 @@ def load_random_y(path, tl: TaskLayout) -> RandomY:
         episode=df["episode_index"].to_numpy(), state_columns=cols, action_columns=acts)
 
 
+def object_frame_ratios(models: DynamicsModels, y: np.ndarray, a: np.ndarray, y2: np.ndarray, tl: TaskLayout,
+                        min_move: float = 1e-4) -> dict[str, float]:
+    """F's one-step error on the object, in the object's own frame, as a share of the error of predicting no change
+    (the trivial predictor), over the transitions (raw units) in which the object moves by more than ``min_move`` m
+    or rad: ``across`` (along the object's first axis: sideways for the box push), ``along`` (its second axis: the
+    push direction) and ``angle``. 1 = F knows no more than 'nothing moves'."""
+    cols = tl.state_columns("Y")
+    ix, iy, ia = (cols.index(c) for c in tl.object_cols)
+    moved = (np.abs(y2[:, [ix, iy, ia]] - y[:, [ix, iy, ia]]).max(axis=1) > min_move)
+    y, a, y2 = y[moved], a[moved], y2[moved]
+    with torch.no_grad():
+        pred_n = models.forward_model(models.y_norm(torch.as_tensor(y, dtype=torch.float32)),
+                                      torch.as_tensor(a, dtype=torch.float32))
+        pred = models.y_norm.inverse(pred_n).numpy().astype(np.float64)
+    cos, sin = np.cos(y[:, ia]), np.sin(y[:, ia])
+
+    def frame(d: np.ndarray) -> np.ndarray:  # (N, 3) displacement -> across, along, angle
+        return np.stack([d[:, ix] * cos + d[:, iy] * sin, -d[:, ix] * sin + d[:, iy] * cos, d[:, ia]], axis=1)
+
+    err, still = frame(pred - y2), frame(y - y2)
+    ratio = (err ** 2).mean(axis=0) / np.maximum((still ** 2).mean(axis=0), 1e-12)
+    return {"across": float(ratio[0]), "along": float(ratio[1]), "angle": float(ratio[2]),
+            "transitions": int(moved.sum())}
+
+
 def split_episodes(episode: np.ndarray, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Boolean train/validation masks; whole episodes go to one side."""
     eps = np.unique(episode)

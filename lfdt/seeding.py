@@ -19,11 +19,13 @@ PURPOSES: dict[str, int] = {
     "demos": 4,
     "translator": 5,
     "bc": 6,
+    "diagnostics": 7,
     "development": 8,
     "evaluation": 9,
 }
 """Purpose -> block index; the block of purpose p is [p * 10M, (p + 1) * 10M). 'development' start states are
-for choosing settings during development; 'evaluation' start states are only for the reported results."""
+for choosing settings during development; 'evaluation' start states are only for the reported results; 'diagnostics'
+episodes probe models (e.g. F on two-arm pushes) and never train or choose anything."""
 
 DOMAIN_INDEX: dict[str, int] = {"Y": 0, "R1H": 1, "HR2": 2}
 BLOCK = 10_000_000

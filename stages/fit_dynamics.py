@@ -8,6 +8,7 @@ from lfdt import dynamics, stage
 from lfdt.box_push_jobs.common import DYNAMICS_FILE
 from lfdt.nets import save_state, torch_device
 from lfdt.tasks.box_push import columns as box_columns
+from lfdt.tasks.box_push.random_motion import push_probe
 
 
 def run() -> None:
@@ -35,6 +36,9 @@ def run() -> None:
             f_mse = sum(res["forward_mse_per_column"][c] for c in cols)
             t_mse = sum(res["forward_trivial_mse_per_column"][c] for c in cols)
             res[f"forward_ratio_{name}"] = f_mse / t_mse
+        # F where the demonstrations are: two arms pushing the box, in and out of step (not in its training data)
+        probe = dynamics.object_frame_ratios(models.cpu(), *push_probe(p.env), box_columns.BOX_PUSH)
+        res.update({f"pushes/forward_ratio_{k}": v for k, v in probe.items()})
         metrics = {k: v for k, v in res.items() if not isinstance(v, dict)}
         f.report.update({**metrics, "per_column": {
             "forward_mse": res["forward_mse_per_column"], "forward_trivial_mse": res["forward_trivial_mse_per_column"],
@@ -42,7 +46,9 @@ def run() -> None:
         stage.write_csv(args.curve, curve)
         f.metrics(metrics)
     print(f"F: held-out MSE {res['forward_mse']:.4g} = {res['forward_ratio']:.3f} x trivial (bar 0.2); "
-          f"F^-1: {res['inverse_mse']:.4g} = {res['inverse_ratio']:.3f} x mean action (bar 0.5)")
+          f"F^-1: {res['inverse_mse']:.4g} = {res['inverse_ratio']:.3f} x mean action (bar 0.5); "
+          f"F on two-arm pushes, box across / along / yaw: {probe['across']:.2f} / {probe['along']:.2f} / "
+          f"{probe['angle']:.2f} x no change")
 
 
 if __name__ == "__main__":

@@ -135,10 +135,14 @@ def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episod
     """Compare translated states with the source where they should agree (diagnostics only, never trained on).
 
     * the real robot's end position, and the object's pose (m, rad): translation should keep them;
-    * the translated missing robot's end position vs the human's hand (m): where the push happens.
+    * the translated missing robot's end position vs the human's hand (m): where the push happens;
+    * how far across the object, in the object's own frame, the translated missing robot's end, the human's hand and
+      the real robot's end are (mean absolute distance from the object's centre line, m), and the missing robot's
+      minus the hand's (``missing_minus_hand_across_m``: > 0 pushes further out than the hand did).
     """
     out: dict[str, list[float]] = {"robot_ee_error_m": [], "box_position_error_m": [], "box_yaw_error_rad": [],
-                                   "missing_robot_ee_to_hand_m": []}
+                                   "missing_robot_ee_to_hand_m": [], "missing_robot_across_m": [], "hand_across_m": [],
+                                   "real_robot_across_m": [], "missing_minus_hand_across_m": []}
     for pairing, path in demos_path.items():
         src = data.read_transitions(path, kind="demos", domain=pairing, task=tl.name)
         src = src[src.episode_index.isin(episodes[pairing])].sort_values(["episode_index", "frame_index"])
@@ -156,4 +160,16 @@ def translation_diagnostics(df: pd.DataFrame, demos_path: dict[str, str], episod
         box_s = src[[s + c for c in tl.object_cols]].to_numpy(float)
         out["box_position_error_m"] += np.linalg.norm(box_t[:, :2] - box_s[:, :2], axis=1).tolist()
         out["box_yaw_error_rad"] += np.abs(box_t[:, 2] - box_s[:, 2]).tolist()
+        missing, hand = np.abs(across(xy(tr, other), box_t)), np.abs(across(xy(src, "h"), box_s))
+        out["missing_robot_across_m"] += missing.tolist()
+        out["hand_across_m"] += hand.tolist()
+        out["real_robot_across_m"] += np.abs(across(xy(tr, robot), box_t)).tolist()
+        out["missing_minus_hand_across_m"] += (missing - hand).tolist()
     return {f"diag/{k}": float(np.mean(v)) for k, v in out.items()}
+
+
+def across(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Where ``points`` (..., 2) lie across an object of planar pose ``pose`` (..., 3: position, angle): their
+    coordinate along the object's own first axis, from its centre (m)."""
+    rel = points - pose[..., :2]
+    return rel[..., 0] * np.cos(pose[..., 2]) + rel[..., 1] * np.sin(pose[..., 2])

@@ -8,6 +8,7 @@ from lfdt import layout
 from lfdt.config import TranslatorConfig
 from lfdt.dynamics import DynamicsModels
 from lfdt.layout import TaskLayout
+from lfdt.nets import sin_cos
 from lfdt.translation.model import Translator
 from lfdt.translation.transitions import PAIRING_INDEX, Transitions
 
@@ -32,6 +33,7 @@ class Losses:
         self.object_mask[obj] = True
         self.dyn_weight = torch.ones(y_dim, device=dev)
         self.dyn_weight[obj] = cfg.dyn_object_weight
+        self.obj_idx = torch.as_tensor(obj, dtype=torch.long, device=dev)  # the object's position, then its angle
 
     def __call__(self, x0: torch.Tensor, x: torch.Tensor, x2: torch.Tensor, pidx: torch.Tensor
                  ) -> dict[str, torch.Tensor]:
@@ -51,7 +53,21 @@ class Losses:
         l_hand = ((torch.gather(y_hat, -1, tr.hand_dst[pidx]) - hand) ** 2).mean(dim=(1, 2))
         return {"y_hat": y_hat, "y_hat2": y_hat2, "a_tilde": a_tilde, "dyn_sq": dyn_sq,
                 "dyn": (dyn_sq * self.dyn_weight).mean(dim=(1, 2)),
-                "id": l_id, "hand": l_hand}
+                "id": l_id, "hand": l_hand, "side": self.side(y_hat, x, pidx)}
+
+    def side(self, y_hat: torch.Tensor, x: torch.Tensor, pidx: torch.Tensor) -> torch.Tensor:
+        """The sideways term per member: the missing robot's end and the human's hand, each across the object in the
+        object's frame (the object's pose as translated), squared difference in units of Y's spread of that end's
+        first coordinate (``translator.lambda_side``)."""
+        tr = self.tr
+        dst = tr.hand_dst[pidx]  # (n, b, 2): the missing robot's end columns of y
+        std, mean = tr.y_std[dst], tr.y_mean[dst]
+        end = torch.gather(y_hat, -1, dst) * std + mean
+        hand = (torch.gather(x, -1, tr.hand_src[pidx]) * tr.hand_scale[pidx] + tr.hand_offset[pidx]) * std + mean
+        obj = y_hat.index_select(-1, self.obj_idx) * tr.y_std[self.obj_idx] + tr.y_mean[self.obj_idx]
+        sin, cos = sin_cos(obj[..., 2])
+        across = ((end - hand)[..., 0] * cos + (end - hand)[..., 1] * sin) / std[..., 0]
+        return (across ** 2).mean(dim=1)
 
     def dyn_split(self, dyn_sq: torch.Tensor, pidx: torch.Tensor) -> dict[str, float]:
         """L_dyn split by the real robot's columns, the missing robot's and the object's (one member)."""
@@ -63,8 +79,10 @@ class Losses:
 
     def selection(self, out: dict[str, torch.Tensor]) -> torch.Tensor:
         """The held-out translation loss a checkpoint is kept by, per member: eq. 6 without the adversarial term
-        (D changes while training, so its loss is no yardstick across iterations)."""
-        return self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"] + self.cfg.lambda_hand * out["hand"]
+        (D changes while training, so its loss is no yardstick across iterations), with the hand and sideways terms
+        where they are on."""
+        return (self.cfg.lambda_dyn * out["dyn"] + self.cfg.lambda_id * out["id"] + self.cfg.lambda_hand * out["hand"]
+                + self.cfg.lambda_side * out["side"])
 
 
 def normalised(tr: Translator, sets: dict[str, Transitions], device: str | torch.device = "cpu"

@@ -217,19 +217,20 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
         tr.D.requires_grad_(False)
         l_adv = g_loss_fn(tr.disc(y_adv))
         loss = (cfg.lambda_adv * l_adv + cfg.lambda_dyn * out["dyn"] + cfg.lambda_id * out["id"]
-                + cfg.lambda_hand * out["hand"])
+                + cfg.lambda_hand * out["hand"] + cfg.lambda_side * out["side"])
         opt_g.zero_grad(set_to_none=True)
         loss.sum().backward()
         opt_g.step()
         tr.D.requires_grad_(True)
         with torch.no_grad():
             acc = 0.5 * ((d_real > 0).float().mean(dim=(1, 2)) + (d_fake < 0).float().mean(dim=(1, 2)))
-            values = torch.stack([l_d, l_adv, out["dyn"], out["id"], out["hand"], loss, acc]).detach().cpu().numpy()
+            values = torch.stack([l_d, l_adv, out["dyn"], out["id"], out["hand"], loss, acc, out["side"]]
+                                 ).detach().cpu().numpy()
         for k in range(n):
             check_finite(float(values[5, k]), "the translator's G loss", it)
             check_finite(float(values[0, k]), "the translator's D loss", it)
             for j, key in enumerate(("loss/D", "loss/adv", "loss/dyn", "loss/id", "loss/hand", "loss/G_total",
-                                     "D/accuracy")):
+                                     "D/accuracy", "loss/side")):
                 sums[k][key] = sums[k].get(key, 0.0) + float(values[j, k])
         if progress is not None:
             progress.update(n)

@@ -27,7 +27,7 @@ from lfdt import data
 from lfdt.config import EnvConfig, RandomConfig
 from lfdt.seeding import episode_seed
 from lfdt.tasks.box_push import columns as box_columns
-from lfdt.tasks.box_push.env import BoxPushModel
+from lfdt.tasks.box_push.env import BoxPushModel, jacobian
 
 
 def random_commands(rng: np.random.Generator, steps: int, act_dim: int, cfg: RandomConfig) -> np.ndarray:
@@ -39,6 +39,49 @@ def random_commands(rng: np.random.Generator, steps: int, act_dim: int, cfg: Ran
         out[t:t + hold] = rng.uniform(-cfg.amplitude, cfg.amplitude, size=act_dim)
         t += hold
     return out
+
+
+PUSH_SPEED = (0.02, 0.12)
+"""Range of a pushing episode's end speed along the push direction per arm, m/s (the robot's top speed is ~0.12)."""
+PUSH_SIDEWAYS = 0.03
+"""Half-range of its sideways end speed, m/s."""
+PUSH_DELAY = (0.0, 1.0)
+"""Range of the time before an arm starts pushing, s."""
+PUSH_DISTANCE = (0.02, 0.2)
+"""Range of how far an arm's end travels before it holds, m."""
+
+
+def push_commands(scene: BoxPushModel, qpos0: np.ndarray, rng: np.random.Generator, steps: int,
+                  cfg: RandomConfig) -> np.ndarray:
+    """A (steps, act_dim) open-loop push: per arm, the torques that move its end along +y (and a little sideways) at a
+    random speed after a random delay for a random distance along its unloaded kinematic path (an overdamped joint
+    holds a speed ``gear * command / damping``), then hold; held uniform commands of ``cfg.push_noise`` on top. The
+    arms' speeds, starts and distances are drawn independently, so the box is pushed in step and out of it."""
+    dt = scene.dt
+    n1, n2 = scene.nq_arm
+    out = np.zeros((steps, scene.act_dim))
+    for arm, sl in zip(scene.arms, (slice(0, n1), slice(n1, n1 + n2))):
+        v = np.array([rng.uniform(-PUSH_SIDEWAYS, PUSH_SIDEWAYS), rng.uniform(*PUSH_SPEED)])
+        start = int(round(rng.uniform(*PUSH_DELAY) / dt))
+        moving = int(round(rng.uniform(*PUSH_DISTANCE) / (np.linalg.norm(v) * dt)))
+        q = np.array(qpos0[sl], dtype=float)
+        gear, damping = np.asarray(arm.cfg.gears), np.asarray(arm.cfg.damping)
+        limit = np.asarray(arm.cfg.joint_range)
+        for t in range(start, min(steps, start + moving)):
+            qdot = np.linalg.pinv(jacobian(arm, q)) @ v
+            out[t, sl] = damping * qdot / gear
+            q = np.clip(q + qdot * dt, -limit, limit)
+    if cfg.push_noise > 0:
+        out += random_commands(rng, steps, scene.act_dim, cfg.model_copy(update={"amplitude": cfg.push_noise}))
+    return np.clip(out, -1.0, 1.0)
+
+
+def episode_commands(scene: BoxPushModel, qpos0: np.ndarray, rng: np.random.Generator, cfg: RandomConfig
+                     ) -> np.ndarray:
+    """One episode's commands: a push with probability ``cfg.push_fraction``, else held uniform commands."""
+    if cfg.push_fraction > 0 and rng.uniform() < cfg.push_fraction:
+        return push_commands(scene, qpos0, rng, cfg.episode_steps, cfg)
+    return random_commands(rng, cfg.episode_steps, scene.act_dim, cfg)
 
 
 def reachable_start(scene: BoxPushModel, rng: np.random.Generator, y_spread: float,
@@ -96,7 +139,9 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
             "kind": "random", "domain": domain, "seed": cfg.seed, "layout": box_columns.describe(),
             "env": env_cfg.model_dump(), "random": cfg.model_dump(),
             "action_distribution": "uniform in [-amplitude, amplitude] per joint, held for "
-                                   "U{hold_min..hold_max} control steps",
+                                   "U{hold_min..hold_max} control steps"
+                                   + ("" if not cfg.push_fraction else "; a share push_fraction of the episodes "
+                                      "push instead (lfdt.tasks.box_push.random_motion.push_commands)"),
             "description": f"random-motion transitions in domain {domain}",
         })
     tables = []
@@ -108,7 +153,7 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
         for ep in batch:
             rng = np.random.default_rng(episode_seed("random", cfg.seed, domain, ep))
             qpos0.append(reachable_start(scene, rng, cfg.box_y_spread))
-            acts.append(random_commands(rng, cfg.episode_steps, scene.act_dim, cfg))
+            acts.append(episode_commands(scene, qpos0[-1], rng, cfg))
         obs, _ = rollout_episodes(scene, np.array(qpos0), np.array(acts), cfg.threads)
         b, t = len(batch), cfg.episode_steps
         tables.append(data.transitions_table(
@@ -124,3 +169,21 @@ def collect_random(domain: str, env_cfg: EnvConfig, cfg: RandomConfig,
     stats = {"transitions": table.num_rows, "episodes": n_episodes, "wall_s": wall,
              "transitions_per_s": done / wall, "physics_steps_per_s": done * env_cfg.frame_skip / wall}
     return table, stats
+
+
+def push_probe(env_cfg: EnvConfig, episodes: int = 200, steps: int = 60, seed: int = 0
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two-arm pushes in Y for judging F where the demonstrations are (not training data): ``episodes`` pushes of
+    :func:`push_commands` without added noise, from the task's start states of the 'diagnostics' seed block. Returns
+    (states, actions, next states) in raw units."""
+    scene = BoxPushModel("Y", env_cfg)
+    cfg = RandomConfig(episode_steps=steps, push_fraction=1.0, push_noise=0.0)
+    qpos0, acts = [], []
+    for ep in range(episodes):
+        rng = np.random.default_rng(episode_seed("diagnostics", seed, "Y", ep))
+        qpos0.append(reachable_start(scene, rng, 0.0))
+        acts.append(push_commands(scene, qpos0[-1], rng, steps, cfg))
+    obs, _ = rollout_episodes(scene, np.array(qpos0), np.array(acts), 1)
+    n = episodes * steps
+    return (obs[:, :-1].reshape(n, -1).astype(np.float32), np.array(acts).reshape(n, -1).astype(np.float32),
+            obs[:, 1:].reshape(n, -1).astype(np.float32))
