@@ -100,3 +100,31 @@ def test_f_and_f_inverse_side_by_side_are_the_same_bits_as_one_after_the_other(r
     assert res_s["forward_mse"] == res_p["forward_mse"] and res_s["inverse_mse"] == res_p["inverse_mse"]
     assert [c["iteration"] for c in res_p["curve"]] == [40, 80, 120]
     assert res_s["curve"][-1]["val/inverse_mse"] == res_p["curve"][-1]["val/inverse_mse"]
+
+
+def test_object_frame_ratios_of_a_model_that_predicts_no_change_are_one():
+    """F judged on the object in its own frame: a model whose f is 0 predicts 'nothing moves' and scores exactly 1
+    in every direction; one that knows the true next state scores 0."""
+    from lfdt.dynamics import object_frame_ratios
+    from lfdt.tasks.box_push import columns as box_columns
+    from lfdt.tasks.box_push.random_motion import push_probe
+
+    y, a, y2 = push_probe(EnvConfig(), episodes=10, steps=40)
+    m = DynamicsModels(19, 6, [8])
+    torch.nn.init.zeros_(m.f.layers[-1].weight)
+    torch.nn.init.zeros_(m.f.layers[-1].bias)
+    r = object_frame_ratios(m, y, a, y2, box_columns.BOX_PUSH)
+    assert r["transitions"] > 100
+    for k in ("across", "along", "angle"):
+        assert r[k] == pytest.approx(1.0, rel=1e-5)
+    cols = box_columns.state_columns("Y")
+    box = [cols.index(c) for c in box_columns.OBJECT_COLUMNS]
+    moved = np.abs(y2[:, box] - y[:, box]).max(axis=1) > 1e-4
+
+    class Oracle(DynamicsModels):  # knows the next state of every moving transition (its normaliser is the identity)
+        def forward_model(self, y_n, a):
+            return torch.as_tensor(y2[moved])
+
+    r = object_frame_ratios(Oracle(19, 6, [8]), y, a, y2, box_columns.BOX_PUSH)
+    for k in ("across", "along", "angle"):
+        assert r[k] < 1e-8

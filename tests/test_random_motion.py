@@ -79,3 +79,30 @@ def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
     bad.write_bytes(raw[:200] + bytes(4000) + raw[4200:])
     with pytest.raises(data.DataFileError, match=r"bad.parquet: not a readable Parquet file"):
         data.read_transitions(bad)
+
+
+def test_pushing_episodes_push_the_box_and_the_default_data_is_unchanged():
+    """random.push_fraction: pushing episodes move the box much further than uniform commands do; with the
+    default 0 the commands are those of before (the generator draws nothing more)."""
+    from lfdt.tasks.box_push.env import BoxPushModel
+    from lfdt.tasks.box_push.random_motion import episode_commands, push_commands, random_commands, rollout_episodes
+
+    scene = BoxPushModel("Y", EnvConfig())
+    cfg = RandomConfig(episode_steps=60)
+    for ep in range(3):
+        a, b = np.random.default_rng(ep), np.random.default_rng(ep)
+        q0 = scene.sample_initial_qpos(a)
+        scene.sample_initial_qpos(b)
+        np.testing.assert_array_equal(episode_commands(scene, q0, a, cfg), random_commands(b, 60, scene.act_dim, cfg))
+    moved = {}
+    for kind in ("random", "push"):
+        q0s, acts = [], []
+        for ep in range(20):
+            rng = np.random.default_rng(100 + ep)
+            q0s.append(scene.sample_initial_qpos(rng))
+            acts.append(push_commands(scene, q0s[-1], rng, 60, cfg) if kind == "push"
+                        else random_commands(rng, 60, scene.act_dim, cfg))
+        obs, _ = rollout_episodes(scene, np.array(q0s), np.array(acts))
+        moved[kind] = float(np.mean(obs[:, -1, -2] - obs[:, 0, -2]))  # box y travelled
+        assert np.abs(np.array(acts)).max() <= 1.0
+    assert moved["push"] > 0.04 and moved["push"] > 3 * abs(moved["random"]), moved

@@ -328,3 +328,50 @@ def test_learning_rate_decays_as_asked():
     assert lr_factor("cosine", 501, 1000) == pytest.approx(0.5)
     assert lr_factor("linear", 1000, 1000) == pytest.approx(0.001)
     assert lr_factor("cosine", 1000, 1000) < 1e-4
+
+
+def test_sideways_term_ties_only_the_across_coordinate_to_the_hand(tiny):
+    """lambda_side: zero when the missing robot's end lies where the hand is across the object, whatever its depth
+    along it; grows with the sideways gap; and training with it alone shrinks it."""
+    env, paths, dyn = tiny
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    cfg = TranslatorConfig(iterations=300, hidden=[64, 64], lambda_adv=0.0, lambda_dyn=0.0, lambda_id=0.0,
+                           lambda_side=1.0, log_every=100, batch_size=32, kinematics="learned")
+    tr = Translator([16], TL)
+    tr.y_mean.copy_(dyn.y_norm.mean)
+    tr.y_std.copy_(dyn.y_norm.std)
+    fit_x_normalizers(tr, dyn, random_x, 1e-2, object_mode="copy", hand_skip=True, tl=TL)
+    torch.nn.init.zeros_(tr.G.layers[-1].weight)
+    torch.nn.init.zeros_(tr.G.layers[-1].bias)  # y_hat: the hand where the missing robot's end goes, the box copied
+    losses = Losses(tr, dyn, cfg, TL)
+    x0, x, x2, pidx = normalised(tr, {p: random_x[p] for p in layout.PAIRINGS})
+    with torch.no_grad():
+        y_hat = tr.generate(x, pidx)
+    assert float(losses.side(y_hat, x, pidx)[0]) < 1e-10
+    y_cols = box_columns.state_columns("Y")
+    yaw = dyn.y_norm.inverse(y_hat[0])[:, y_cols.index("box.yaw")]
+    for arm in ("r1", "r2"):
+        ix, iy = y_cols.index(f"{arm}.ee_x"), y_cols.index(f"{arm}.ee_y")
+        std_x, std_y = float(dyn.y_norm.std[ix]), float(dyn.y_norm.std[iy])
+        # 2 cm along the object's second axis (deeper into or out of the push): no sideways gap
+        along = y_hat.clone()
+        along[0, :, ix] += -0.02 * torch.sin(yaw) / std_x
+        along[0, :, iy] += 0.02 * torch.cos(yaw) / std_y
+        assert float(losses.side(along, x, pidx)[0]) < 1e-8
+        # 2 cm across it: (0.02 / std_x)^2 on the frames whose missing robot is this arm
+        across = y_hat.clone()
+        across[0, :, ix] += 0.02 * torch.cos(yaw) / std_x
+        across[0, :, iy] += 0.02 * torch.sin(yaw) / std_y
+        share = float((tr.hand_dst[pidx[0]][:, 0] == ix).float().mean())
+        assert float(losses.side(across, x, pidx)[0]) == pytest.approx(share * (0.02 / std_x) ** 2, rel=1e-3)
+    _, stats = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
+    assert stats["curve"][-1]["loss/side"] < 0.5 * stats["curve"][0]["loss/side"]
+
+
+def test_across_is_the_coordinate_along_the_objects_first_axis():
+    from lfdt.translation.apply import across
+
+    pose = np.array([[0.0, 0.2, 0.0], [0.1, 0.0, np.pi / 2], [0.0, 0.0, 0.3]])
+    pts = np.array([[0.03, 0.25], [0.1, 0.04], [0.05 * np.cos(0.3) - 0.02 * np.sin(0.3),
+                                                 0.05 * np.sin(0.3) + 0.02 * np.cos(0.3)]])
+    np.testing.assert_allclose(across(pts, pose), [0.03, 0.04, 0.05], atol=1e-12)
