@@ -104,6 +104,9 @@ def aggregate(trials: pd.DataFrame) -> pd.DataFrame:
     return _ordered(pd.DataFrame(out)).reset_index(drop=True)
 
 
+PREMISE_TITLE = "Both robots' programs together (premise)"
+"""Table I's last row: the demonstrations' robot halves run together in Y (reports/experts.json)."""
+
 BASELINE = "bc_no_translation"
 """The row every other is compared with, paired (the same seeds and start states)."""
 
@@ -122,9 +125,10 @@ def _cell(r, pre: str = "") -> str:
             f"worst seed {100 * r[f'{pre}worst_seed']:.0f})")
 
 
-def markdown(table: pd.DataFrame) -> str:
+def markdown(table: pd.DataFrame, premise: dict | None = None) -> str:
     """Table I as markdown: ours on all start states by the end-state rule (per seed, interval) and by the path
-    rule, ours on the first 20, the paper's."""
+    rule, ours on the first 20, the paper's; with ``premise`` (``programs_together_in_Y`` of reports/experts.json) a
+    last row: the two pairings' robot halves together, nobody learning."""
     demos = sorted(table.demos.unique())
     head = "| method | " + " | ".join(f"{d} demos: ours | {d}: ours, path rule | {d}: ours, first {PAPER_TRIALS} | "
                                      f"{d}: paper" for d in demos) + " |"
@@ -141,6 +145,9 @@ def markdown(table: pd.DataFrame) -> str:
             cells += [_cell(r), _cell(r, "path_"), _pct(r[f"success_rate_first{PAPER_TRIALS}"]),
                       _pct(r.paper_success_rate)]
         lines.append(f"| {methods.get(m).title} | " + " | ".join(cells) + " |")
+    if premise is not None:
+        lines.append(f"| {PREMISE_TITLE} | " + " | ".join(
+            f"{_pct(premise['success_rate'])} | {_pct(premise['path_success_rate'])} | – | –" for _ in demos) + " |")
     n_seeds = int(table.seeds.max())
     per_seed = int(table.trials_per_seed.max())
     block = "" if "start_states" not in table or set(table.start_states) == {"evaluation"} else \
@@ -156,7 +163,11 @@ def markdown(table: pd.DataFrame) -> str:
               "task asks the arms to push 'while avoiding the rotation of the box'. "
               f"'First {PAPER_TRIALS}': the paper's protocol "
               f"({PAPER_TRIALS} trials per seed), on the first start states of the same list (end-state rule). "
-              "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper." + block]
+              "Paper: Kobayashi et al. 2023, Table I. Rows marked (ours) are not in the paper." + block
+              + ("" if premise is None else
+                 f" '{PREMISE_TITLE}': the two pairings' robot halves together in Y (each robot replays takes of its "
+                 f"own program, nobody adapts, nothing is learnt), on {premise['episodes']} development start "
+                 f"states; the protocol's premise asks at most {100 * premise['gate']:.0f} % by the path rule.")]
     return "\n".join(lines) + "\n"
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 from lfdt import mlflow_runs, mlflow_views, report, stage
 
 INPUTS = {"expert-reports": "the experts' reports, <pairing>_train.json",
+          "experts-summary": "the experts' summary with the protocol's premise (reports/experts.json)",
           "random-reports": "the random motion's reports", "demo-reports": "the demonstrations' reports",
           "dynamics-report": "the dynamics model's report (a file)", "translator-reports": "the translators' reports",
           "track-reports": "the re-executions' reports", "bc-reports": "the BC reports",
@@ -41,7 +42,8 @@ def run() -> None:
     table = report.aggregate(trials)
     stage.write_csv(reports / "table1_runs.csv", run_rows.to_dict("records"))
     stage.write_csv(reports / "table1.csv", table.to_dict("records"))
-    (reports / "table1.md").write_text(report.markdown(table) + "\n" + report.differences_markdown(table))
+    premise = stage.read_report(args.experts_summary)["programs_together_in_Y"]
+    (reports / "table1.md").write_text(report.markdown(table, premise) + "\n" + report.differences_markdown(table))
     (reports / "table1.tex").write_text(report.latex(table))
     stage.write_csv(reports / "success_vs_demos.csv", run_rows[["method", "demos", "seed", "success_rate"]]
                     .to_dict("records"))
@@ -93,7 +95,7 @@ def run() -> None:
     # not the frame's report: the parent run's id and the runs it adopted, written once the run has ended
     stage.write_report(reports / "table1.json", {**headline, "mlflow_parent_run_id": parent_id,
                                                  "mlflow_child_runs": adopted, "total_stage_wall_s": total_wall})
-    print(report.markdown(table))
+    print(report.markdown(table, premise))
     print(report.differences_markdown(table))
     print(times.to_string(index=False))
 

@@ -186,17 +186,19 @@ class ProgrammedPartnerEnv(gym.Env):
 
 
 def programs_together_success(env_cfg: EnvConfig, cfg: ProgramConfig, episodes: int, seed_purpose: str = "development",
-                              run_seed: int = 0) -> float:
-    """Success rate of both robots replaying takes of their own programs together in Y, nobody adapting.
+                              run_seed: int = 0) -> dict[str, float]:
+    """Success of both robots replaying takes of their own programs together in Y, nobody adapting: the two pairings'
+    robot halves run together, by the end-state rule (``end``) and the path rule (``path``).
 
-    The protocol's premise is that this is low: otherwise replaying the programs would already solve the task.
+    The protocol's premise is that this is low: otherwise replaying the programs would already solve the task, and
+    BC without translation, which clones each robot's half alone, would need no translation to coordinate.
     """
     from lfdt.seeding import episode_seed
 
     env = BoxPushEnv("Y", env_cfg)
     n1, n2 = env.scene.nq_arm
     slots = (slice(0, n1), slice(n1, n1 + n2))
-    wins = 0
+    wins = np.zeros(2)
     for i in range(episodes):
         env.reset(seed=episode_seed(seed_purpose, run_seed, "Y", i))
         qpos = env.data.qpos.copy()
@@ -204,8 +206,8 @@ def programs_together_success(env_cfg: EnvConfig, cfg: ProgramConfig, episodes: 
                              env.np_random) for arm, sl in zip(env.scene.arms, slots)]
         for _ in range(env_cfg.max_episode_steps):
             a = np.concatenate([r.action(env.data.qpos[sl].copy()) for r, sl in zip(robots, slots)])
-            _, _, term, trunc, _ = env.step(a)
+            _, _, term, trunc, info = env.step(a)
             if term or trunc:
                 break
-        wins += bool(term)
-    return wins / episodes
+        wins += (bool(term), bool(term) and info["is_path_success"])
+    return {"end": float(wins[0] / episodes), "path": float(wins[1] / episodes)}
