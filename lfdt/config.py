@@ -414,6 +414,8 @@ class TranslatorConfig(Strict):
     """Non-saturating BCE-with-logits as in eq. 1, or least squares."""
     history_size: Annotated[int, Field(ge=0)] = 0
     """Pool of past generated states shown to D (0 = none; Cycle-Dynamics uses 128)."""
+    d_lr_scale: PosFloat = 1.0
+    """D's learning rate is this times G's (1 = the paper's one learning rate; Cycle-Dynamics: 10)."""
     disc_input: Literal["state", "robots"] = "robots"
     """What D sees of a state: all of it ('state', the paper), or only the robots' columns, those G makes
     ('robots': G cannot change the copied box, through which D told translated demonstrations apart). With adv_on
@@ -427,6 +429,8 @@ class TranslatorConfig(Strict):
     state)."""
     dyn_scale: Literal["delta", "state"] = "delta"
     """Units of L_dyn: normalised one-step changes ('delta') or normalised states ('state')."""
+    dyn_norm: Literal["l2", "l1"] = "l2"
+    """L_dyn's per-column error: squared ('l2', eq. 2) or absolute ('l1', Cycle-Dynamics)."""
     labels: Literal["inverse", "recorded_robot"] = "inverse"
     """BC action labels: F^-1(y_hat_t, y_hat_t+1) for both arms, or keep the recorded action of the real robot."""
     restarts: PosInt = 1

@@ -43,7 +43,8 @@ class Losses:
         y_hat, y_hat2 = self.tr.generate_pair(x0, x, x2, pidx)
         a_tilde = self.dyn.inverse_model(y_hat, y_hat2)
         y_tilde = self.dyn.forward_model(y_hat, a_tilde)
-        dyn_sq = ((y_tilde - y_hat2) / self.dyn_scale) ** 2
+        err = (y_tilde - y_hat2) / self.dyn_scale
+        dyn_sq = err ** 2 if self.cfg.dyn_norm == "l2" else err.abs()  # the per-column error L_dyn averages
         y_robot = y_hat[self.robot_mask[pidx]].view(n, b, self.n_robot)
         l_id = ((y_robot - x[..., :self.n_robot]) ** 2).mean(dim=(1, 2))
         tr = self.tr

@@ -162,7 +162,7 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
     with torch.no_grad():
         y_real_all = dyn.y_norm(torch.as_tensor(y_random, device=device))
     opt_g = Adam(tr.generator_parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
-    opt_d = Adam(tr.D.parameters(), lr=cfg.learning_rate, betas=(0.5, 0.999))
+    opt_d = Adam(tr.D.parameters(), lr=cfg.learning_rate * cfg.d_lr_scale, betas=(0.5, 0.999))
     d_loss_fn, g_loss_fn = _gan_losses(cfg.gan_loss)
     losses = Losses(tr, dyn, cfg, tl)
     quarter = max(1, cfg.batch_size // 4)
@@ -175,9 +175,9 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
         if cfg.lr_decay != "none":
-            for opt in (opt_g, opt_d):
+            for opt, scale in ((opt_g, 1.0), (opt_d, cfg.d_lr_scale)):
                 for group in opt.param_groups:
-                    group["lr"] = cfg.learning_rate * lr_factor(cfg.lr_decay, it, cfg.iterations)
+                    group["lr"] = scale * cfg.learning_rate * lr_factor(cfg.lr_decay, it, cfg.iterations)
         batch = []
         for k in range(n):
             xd0, xd, xd2, pd_ = demo_s[k].sample(quarter)
