@@ -88,6 +88,7 @@ def main() -> None:
     doc["evaluation"]["start_states"] = "development"
     doc["evaluation"]["videos"] = 0
     p = validate_params(doc)
+    args.params_doc = doc
     params_path = root / "params.yaml"
     params_path.write_text(yaml.safe_dump(doc, sort_keys=False))
     os.environ["DVC_EXP_NAME"] = f"dev-{args.name}"  # the MLflow runs' tag
@@ -163,9 +164,11 @@ FIELDS = ["date", "trial", "hypothesis", "changes", "method", "demos", "seeds", 
           "ci_low_pct", "ci_high_pct", "worst_seed_pct", "per_seed_pct", "diff_vs_bc_no_translation_pct",
           "diff_ci_low_pct", "diff_ci_high_pct", "cpu_model", "numerics", "wall_min", "demos_dir", "path_success_pct",
           "path_ci_low_pct", "path_ci_high_pct", "path_worst_seed_pct", "path_per_seed_pct",
-          "path_diff_vs_bc_no_translation_pct", "path_diff_ci_low_pct", "path_diff_ci_high_pct"]
+          "path_diff_vs_bc_no_translation_pct", "path_diff_ci_low_pct", "path_diff_ci_high_pct",
+          "f_push_across", "f_push_angle"]
 """The columns of docs/experiments/trials.csv (those from demos_dir on were added with the path rule; earlier rows
-leave them empty: those trials ran on data/demos and before the rule)."""
+leave them empty: those trials ran on data/demos and before the rule). ``f_push_*``: F's error on two-arm pushes of
+the box, across it and in yaw, as a share of predicting no change (:func:`lfdt.dynamics.object_frame_ratios`)."""
 
 OUTCOMES = ROOT / "docs" / "experiments" / "outcomes"
 """Every trial's 0/1 outcomes, one file per (trial, method, demos): a later trial pairs with them."""
@@ -195,6 +198,33 @@ def load_outcomes(trial: str, method: str, demos: int, seeds: list[int], rule: s
     return np.array([[int(c) for c in rows[str(s)]] for s in seeds], dtype=float)
 
 
+def widen(path: Path, fields: list[str]) -> None:
+    """Give a trials file written before columns were added to FIELDS those columns (empty in its rows); any other
+    header is left for :func:`lfdt.csvlog.append_rows` to refuse."""
+    if not path.exists():
+        return
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0] == fields or rows[0] != fields[:len(rows[0])]:
+        return
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(fields)
+        w.writerows(r + [""] * (len(fields) - len(r)) for r in rows[1:])
+    tmp.replace(path)
+
+
+def push_ratios(dynamics_dir: Path, params_doc: dict) -> dict:
+    """F of ``dynamics_dir`` on two-arm pushes of the box (the probe of ``stages/fit_dynamics.py``)."""
+    from lfdt.config import validate_params
+    from lfdt.dynamics import load_models, object_frame_ratios
+    from lfdt.tasks.box_push.random_motion import push_probe
+
+    p = validate_params(params_doc)
+    return object_frame_ratios(load_models(dynamics_dir / common.DYNAMICS_FILE), *push_probe(p.env), common.LAYOUT)
+
+
 def _flat(d: dict, prefix: str = "") -> dict:
     out = {}
     for k, v in d.items():
@@ -211,6 +241,7 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
     trials = out_dir / "trials.csv"
     fields = FIELDS
     info = numerics.describe()
+    f_push = push_ratios(args.dynamics_dir.resolve(), args.params_doc)
     out = []
     for (m, n), by_rule in rows.items():
         row = {"date": datetime.date.today().isoformat(), "trial": args.name, "hypothesis": args.hypothesis,
@@ -218,6 +249,7 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
                                                if args.bc_seed_offset else [])), "method": m, "demos": n,
                "seeds": " ".join(map(str, args.seeds)), "start_states": "development",
                "demos_dir": os.path.relpath(args.demos_dir.resolve(), ROOT),
+               "f_push_across": f"{f_push['across']:.3f}", "f_push_angle": f"{f_push['angle']:.3f}",
                "cpu_model": info["cpu_model"], "numerics": info["numerics"], "wall_min": f"{wall / 60:.1f}"}
         for pre, o in by_rule.items():
             lo, hi = evaluation.seed_state_interval(o)
@@ -238,6 +270,7 @@ def write_results(args, rows: dict, diag_rows: list[dict], wall: float) -> None:
                         f"{pre}diff_vs_bc_no_translation_pct": diff, f"{pre}diff_ci_low_pct": dlo,
                         f"{pre}diff_ci_high_pct": dhi})
         out.append(row)
+    widen(trials, fields)
     append_rows(trials, fields, [[str(r.get(f, "")) for f in fields] for r in out])  # all rows in one write
     keys = sorted({k for r in diag_rows for k in r})
     if not keys:
