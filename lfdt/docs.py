@@ -200,16 +200,21 @@ def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tu
         rows = sorted((r for r in rows if r["trial"] in only), key=lambda r: only.index(r["trial"]))
         rows = [r for r in rows if r["method"] != "bc_no_translation" or r["trial"] == only[0]]
     extra = "".join(f" {d} |" for d in diagnostics)
-    head = "| trial | change | method | demos | success | 95 % interval | worst seed | vs BC w/o translation |"
+    head = ("| trial | change | method | demos | success | 95 % interval | worst seed | vs BC w/o translation | "
+            "path rule (worst seed) | path rule: vs BC w/o |")
     lines = [head + extra,
-             "| --- | --- | --- | --- | --- | --- | --- | --- |" + " --- |" * len(diagnostics)]
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |" + " --- |" * len(diagnostics)]
+
+    def diff(r: dict, pre: str = "") -> str:
+        d = r.get(f"{pre}diff_vs_bc_no_translation_pct")
+        return f"{d} ({r[f'{pre}diff_ci_low_pct']} to {r[f'{pre}diff_ci_high_pct']})" if d else "–"
+
     for r in rows:
-        diff = f"{r['diff_vs_bc_no_translation_pct']} ({r['diff_ci_low_pct']} to {r['diff_ci_high_pct']})" \
-            if r["diff_vs_bc_no_translation_pct"] else "–"
+        path = f"{r['path_success_pct']} % ({r['path_worst_seed_pct']} %)" if r.get("path_success_pct") else "–"
         diag = "".join(f" {_seed_mean(root, r['trial'], r['method'], d)} |" for d in diagnostics)
         lines.append(f"| {r['trial']} | {r['changes'] or '(none)'} | {r['method']} | {r['demos']} | "
                      f"{r['success_pct']} % | {r['ci_low_pct']}–{r['ci_high_pct']} | {r['worst_seed_pct']} % | "
-                     f"{diff} |" + diag)
+                     f"{diff(r)} | {path} | {diff(r, 'path_')} |" + diag)
     cpus = sorted({f"{r['cpu_model']} ({r['numerics']})" for r in rows})
     dates = sorted({r["date"] for r in rows})
     lines += ["", f"Development seeds {rows[0]['seeds'] if rows else ''}, development start states (200 per seed); "
@@ -261,6 +266,44 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
     return f"{sum(vals) / len(vals):.4g}" if vals else "–"
 
 
+ISSUE37_PREFIX = "i37-"
+"""The development trials of issue 37 (a demonstration protocol that needs coordination, a translator without its
+shared sideways bias): their table in docs/experiments.md shows the diagnostics each hypothesis is about."""
+
+
+def issue37(root: Path) -> str:
+    """Issue 37's development trials, both success rules, with what they were about: how far the replacing robot
+    pushes further out across the box than the hand did, its distance to the hand, the open-loop replay of the
+    labels, and F's error on two-arm pushes across the box and in yaw (a share of predicting no change)."""
+    rows = [r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+            if r["trial"].startswith(ISSUE37_PREFIX)]
+    lines = ["| trial | change | method | demos | success (worst seed) | path rule (worst seed) | path rule: vs BC "
+             "w/o | replacing robot further out than the hand (cm) | replacing robot to the hand (cm) | replay of the "
+             "labels solves | F on pushes: across / yaw |", "| --- |" + " --- |" * 10]
+
+    def mean(r: dict, key: str, scale: float = 1.0, fmt: str = ".2f") -> str:
+        v = _seed_mean(root, r["trial"], r["method"], key)
+        return "–" if v == "–" else f"{scale * float(v):{fmt}}"
+
+    for r in rows:
+        d = r.get("path_diff_vs_bc_no_translation_pct")
+        diff = f"{d} ({r['path_diff_ci_low_pct']} to {r['path_diff_ci_high_pct']})" if d else "–"
+        f_push = f"{r['f_push_across']} / {r['f_push_angle']}" if r.get("f_push_across") else "–"
+        pct = "" if mean(r, "replay_success_rate") == "–" else " %"
+        lines.append(f"| {r['trial']} | {r['changes'] or '(none)'} | {r['method']} | {r['demos']} | "
+                     f"{r['success_pct']} % ({r['worst_seed_pct']} %) | {r['path_success_pct']} % "
+                     f"({r['path_worst_seed_pct']} %) | {diff} | {mean(r, 'diag/missing_minus_hand_across_m', 100)} | "
+                     f"{mean(r, 'diag/missing_robot_ee_to_hand_m', 100)} | "
+                     f"{mean(r, 'replay_success_rate', 100, '.0f')}{pct} | "
+                     f"{f_push} |")
+    cpus = sorted({f"{r['cpu_model']} ({r['numerics']})" for r in rows})
+    dates = sorted({r["date"] for r in rows})
+    lines += ["", f"Development seeds {rows[0]['seeds'] if rows else ''}, development start states (200 per seed); "
+              f"{', '.join(cpus)}; {dates[0] if dates else ''} to {dates[-1] if dates else ''}. Diagnostics are means "
+              "over the seeds' translators; BC without translation's rows have none."]
+    return "\n".join(lines)
+
+
 def load_test(root: Path) -> str:
     """What the load test found on each store (reports/load.json, written by tools/load_test.py)."""
     docs = _read_json(root / "reports" / "load.json")
@@ -284,7 +327,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
     "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,
-    "bc_seed_spread": bc_seed_spread}
+    "bc_seed_spread": bc_seed_spread, "issue37": issue37}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)
