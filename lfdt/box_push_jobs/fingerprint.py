@@ -69,7 +69,8 @@ def _mujoco() -> tuple[str, dict]:
             obs, reward, *_ = env.step(0.8 * np.sin(0.3 * i + t))
             traj.append(np.r_[obs, reward])
         parts.append(np.concatenate(traj))
-    table, _ = collect_random("Y", env_cfg, RandomConfig(transitions=600, episodes_per_batch=3, threads=1))
+    table, _ = collect_random("Y", env_cfg, RandomConfig(transitions=600, episodes_per_batch=3, threads=1,
+                                                         push_fraction=0.0))
     parts.append(table.to_pandas().drop(columns=[], errors="ignore").select_dtypes("number").to_numpy())
     return _hash(*parts), {"random_motion": table}
 
@@ -115,7 +116,7 @@ def _translator(random_y_table, dyn) -> str:
         train, held = split_held_out(sets, 0.34, seed)
         members.append(Member(train, seed, held))
     cfg = TranslatorConfig(hidden=[32, 32], iterations=30, batch_size=16, select_every=10, log_every=10,
-                           hand_offset=True, lambda_hand=1.0)
+                           hand_offset=True, lambda_hand=1.0, lambda_side=0.0)
     trs, stats = train_translators(members, sets, y, dyn, cfg, tl=tl, kinematics=box_push_kinematics(EnvConfig()))
     lsgan, _ = train_translators(members[:1], sets, y, dyn,
                                  cfg.model_copy(update={"gan_loss": "lsgan", "iterations": 10}), tl=tl,

@@ -172,6 +172,9 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
     best: list[tuple[float, dict | None, int]] = [(float("inf"), None, 0)] * n
     sums = [dict() for _ in members]
     curves: list[list[dict]] = [[] for _ in members]
+    # the sideways term joins the curve only where it is on (translators without it keep their curves of before)
+    curve_keys = ("loss/D", "loss/adv", "loss/dyn", "loss/id", "loss/hand", "loss/G_total", "D/accuracy",
+                  *(("loss/side",) if cfg.lambda_side else ()))
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
         if cfg.lr_decay != "none":
@@ -229,8 +232,7 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
         for k in range(n):
             check_finite(float(values[5, k]), "the translator's G loss", it)
             check_finite(float(values[0, k]), "the translator's D loss", it)
-            for j, key in enumerate(("loss/D", "loss/adv", "loss/dyn", "loss/id", "loss/hand", "loss/G_total",
-                                     "D/accuracy", "loss/side")):
+            for j, key in enumerate(curve_keys):
                 sums[k][key] = sums[k].get(key, 0.0) + float(values[j, k])
         if progress is not None:
             progress.update(n)
