@@ -10,7 +10,10 @@ produced (SHA-256, first 16 hex digits):
 * ``bc``: a stack of two BC policies with input noise (weights), then both acting in lockstep from evaluation
   start states (:func:`lfdt.evaluation.rollout_lockstep`: actions and outcomes);
 * ``sac``: stable-baselines3's SAC gradient steps of the human stand-in beside its programmed robot (weights);
-* ``statistics``: NumPy and SciPy statistics of the reports (normalisers, intervals over seeds and start states).
+* ``statistics``: NumPy and SciPy statistics of the reports (normalisers, intervals over seeds and start states);
+* ``pushes``: random-motion episodes that push the box (``random.push_fraction``), F's error on two-arm pushes in the
+  box's frame (``reports/dynamics.json``'s ``pushes/``), and a translator trained with the sideways term
+  (``translator.lambda_side``: weights and curves).
 
 ``python -m lfdt.box_push_jobs.fingerprint`` prints the hashes (``--out`` writes them as JSON); the ``fingerprint``
 stage writes ``reports/fingerprint.json``, and ``tests/test_fingerprint.py`` recomputes them and compares. Where the
@@ -25,6 +28,7 @@ import argparse
 import hashlib
 import json
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,9 +37,9 @@ import numpy as np
 import pandas as pd
 import torch
 
-from lfdt import layout, numerics
+from lfdt import data, layout, numerics
 
-COMPONENTS = ("mujoco_step", "dynamics", "translator", "bc", "sac", "statistics")
+COMPONENTS = ("mujoco_step", "dynamics", "translator", "bc", "sac", "statistics", "pushes")
 """The components hashed, in the order they run."""
 
 
@@ -178,6 +182,34 @@ def _statistics() -> str:
     return _hash(norm.mean, norm.std, np.array(values))
 
 
+def _pushes(random_y_table, dyn) -> str:
+    from lfdt.box_push_jobs.translator import box_push_kinematics
+    from lfdt.config import EnvConfig, RandomConfig, TranslatorConfig
+    from lfdt.dynamics import object_frame_ratios
+    from lfdt.tasks.box_push import columns as box_columns
+    from lfdt.tasks.box_push.random_motion import collect_random, push_probe
+    from lfdt.translation.training import Member, train_translators
+    from lfdt.translation.transitions import load_x_transitions
+
+    env_cfg = EnvConfig()
+    tl = box_columns.BOX_PUSH
+    tables = {d: collect_random(d, env_cfg, RandomConfig(transitions=400, episode_steps=40, episodes_per_batch=5,
+                                                         threads=1, push_fraction=0.5))[0] for d in layout.DOMAINS}
+    probe = object_frame_ratios(dyn, *push_probe(env_cfg, episodes=4, steps=30), tl)
+    with tempfile.TemporaryDirectory() as tmp:
+        sets = {p: load_x_transitions(data.write_table(tables[p], Path(tmp) / f"{p}.parquet"), p, tl=tl,
+                                      kind="random") for p in layout.PAIRINGS}
+    y = tables["Y"].to_pandas()[[layout.STATE_PREFIX + c for c in tl.state_columns("Y")]].to_numpy(np.float32,
+                                                                                                 copy=True)
+    cfg = TranslatorConfig(hidden=[32, 32], iterations=20, batch_size=16, select_every=10, log_every=10,
+                           lambda_side=1.0)
+    trs, stats = train_translators([Member(sets, 3, None)], sets, y, dyn, cfg, tl=tl,
+                                   kinematics=box_push_kinematics(env_cfg))
+    curves = np.array([[v for c in st["curve"] for v in c.values()] for st in stats])
+    numbers = [tables[d].to_pandas().select_dtypes("number").to_numpy() for d in layout.DOMAINS]
+    return _hash(*numbers, np.array([probe["across"], probe["along"], probe["angle"]]), trs[0].state_dict(), curves)
+
+
 def compute(only: list[str] | None = None, log: Callable[[str], None] | None = None) -> dict[str, str]:
     """The hash of each component (all of :data:`COMPONENTS`, or ``only`` those)."""
     torch.set_num_threads(1)
@@ -194,14 +226,14 @@ def compute(only: list[str] | None = None, log: Callable[[str], None] | None = N
         out["mujoco_step"] = mj
         note("mujoco_step", t0)
     dyn = None
-    if want & {"dynamics", "translator"}:
+    if want & {"dynamics", "translator", "pushes"}:
         t0 = time.perf_counter()
         h, dyn = _dynamics(data["random_motion"])
         if "dynamics" in want:
             out["dynamics"] = h
             note("dynamics", t0)
     for name, fn in (("translator", lambda: _translator(data["random_motion"], dyn)), ("bc", _bc), ("sac", _sac),
-                     ("statistics", _statistics)):
+                     ("statistics", _statistics), ("pushes", lambda: _pushes(data["random_motion"], dyn))):
         if name in want:
             t0 = time.perf_counter()
             out[name] = fn()
