@@ -375,3 +375,30 @@ def test_across_is_the_coordinate_along_the_objects_first_axis():
     pts = np.array([[0.03, 0.25], [0.1, 0.04], [0.05 * np.cos(0.3) - 0.02 * np.sin(0.3),
                                                  0.05 * np.sin(0.3) + 0.02 * np.cos(0.3)]])
     np.testing.assert_allclose(across(pts, pose), [0.03, 0.04, 0.05], atol=1e-12)
+
+
+def test_cycle_dynamics_options_l1_dynamics_and_a_faster_discriminator(tiny):
+    """dyn_norm 'l1' averages the absolute per-column error where 'l2' averages its square; d_lr_scale multiplies D's
+    learning rate (Adam's first step moves each weight by about the learning rate, so D moves ~10x as far)."""
+    env, paths, dyn = tiny
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    tr = Translator([16], TL)
+    tr.y_mean.copy_(dyn.y_norm.mean)
+    tr.y_std.copy_(dyn.y_norm.std)
+    fit_x_normalizers(tr, dyn, random_x, 1e-2, tl=TL)
+    batch = normalised(tr, {p: random_x[p] for p in layout.PAIRINGS})
+    with torch.no_grad():
+        l2 = Losses(tr, dyn, TranslatorConfig(kinematics="learned"), TL)(*batch)
+        l1 = Losses(tr, dyn, TranslatorConfig(kinematics="learned", dyn_norm="l1"), TL)(*batch)
+    torch.testing.assert_close(l1["dyn_sq"], l2["dyn_sq"].sqrt())
+    assert float(l1["dyn"][0]) == pytest.approx(float(l1["dyn_sq"].mean()), rel=1e-5)
+
+    def d_step(scale: float) -> float:
+        cfg = TranslatorConfig(iterations=1, hidden=[16], batch_size=8, log_every=1, select_every=1,
+                               kinematics="learned", d_lr_scale=scale)
+        d_cols = [i for i, c in enumerate(TL.state_columns("Y")) if c not in TL.object_cols]  # D sees the robots
+        init = Translator([16], TL, d_cols=d_cols, n=1, generators=[torch.Generator().manual_seed(0)]).D.state_dict()
+        tr1, _ = train_translator(random_x, random_x, np.zeros((10, 19), np.float32), dyn, cfg, seed=0, tl=TL)
+        return float(sum((tr1.D.state_dict()[k] - v).abs().mean() for k, v in init.items()))
+
+    assert d_step(10.0) == pytest.approx(10 * d_step(1.0), rel=0.05)
