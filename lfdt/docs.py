@@ -304,6 +304,30 @@ def issue37(root: Path) -> str:
     return "\n".join(lines)
 
 
+PROBE_VARIANTS = {"clones": "both clones (BC without translation as evaluated)",
+                  "clone1+program2": "Robot1's clone beside Robot2's program",
+                  "program1+clone2": "Robot1's program beside Robot2's clone",
+                  "yaw-frozen": "both clones, the box yaw they see held at its start value",
+                  "yaw-zero": "both clones, the box yaw they see at 0"}
+"""The variants of tools/probe_halves.py, as the docs name them."""
+
+
+def probe_halves(root: Path) -> str:
+    """BC without translation's cloned robot halves probed (docs/experiments/probe_halves_*.json)."""
+    lines = ["| trial | demos | variant | end-state rule | path rule | path rule per seed |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    docs = [_read_json(f) for f in sorted((root / "docs" / "experiments").glob("probe_halves_*.json"))]
+    for d in docs:
+        for k, v in d["variants"].items():
+            lines.append(f"| {d['trial']} | {d['demos']} | {PROBE_VARIANTS.get(k, k)} | {v['end_pct']} % | "
+                         f"{v['path_pct']} % | {', '.join(f'{x:.0f}' for x in v['per_seed_path_pct'])} |")
+    if docs:
+        lines += ["", f"Development seeds {', '.join(map(str, docs[0]['seeds']))}, {docs[0]['trials_per_seed']} "
+                  f"development start states per seed; {docs[0]['cpu_model']}, {docs[0]['date']} "
+                  "(`python tools/probe_halves.py`)."]
+    return "\n".join(lines)
+
+
 def load_test(root: Path) -> str:
     """What the load test found on each store (reports/load.json, written by tools/load_test.py)."""
     docs = _read_json(root / "reports" / "load.json")
@@ -327,7 +351,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
     "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,
-    "bc_seed_spread": bc_seed_spread, "issue37": issue37}
+    "bc_seed_spread": bc_seed_spread, "issue37": issue37, "probe_halves": probe_halves}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)

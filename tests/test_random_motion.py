@@ -82,13 +82,13 @@ def test_readers_refuse_the_wrong_kind_of_data_and_name_corrupt_files(tmp_path):
 
 
 def test_pushing_episodes_push_the_box_and_the_default_data_is_unchanged():
-    """random.push_fraction: pushing episodes move the box much further than uniform commands do; with the
-    default 0 the commands are those of before (the generator draws nothing more)."""
+    """random.push_fraction: pushing episodes move the box much further than uniform commands do; at 0 the commands
+    are those of the plain random motion (the generator draws nothing more)."""
     from lfdt.tasks.box_push.env import BoxPushModel
     from lfdt.tasks.box_push.random_motion import episode_commands, push_commands, random_commands, rollout_episodes
 
     scene = BoxPushModel("Y", EnvConfig())
-    cfg = RandomConfig(episode_steps=60)
+    cfg = RandomConfig(episode_steps=60, push_fraction=0.0)
     for ep in range(3):
         a, b = np.random.default_rng(ep), np.random.default_rng(ep)
         q0 = scene.sample_initial_qpos(a)
