@@ -79,12 +79,16 @@ def cross_cpu(root: Path) -> str:
         else:
             cpu, isa = doc["host_cpu_model"], doc["host_cpu_isa"].upper().replace("AVX512", "AVX-512")
         n_same = sum(r["matches_committed"].values())
-        verdict = "yes, all components" if r["all_match"] else \
+        verdict = f"yes, all {len(r['matches_committed'])} components compared" if r["all_match"] else \
             f"no ({n_same}/{len(r['matches_committed'])} components)"
         lines.append(f"| {cpu} | {isa} | {r['numerics']} | {verdict} |")
     libs = ", ".join(f"{k} {v}" for k, v in sorted(fp["versions"].items()))
+    compared = sorted({k for r in doc["runs"] for k in r["matches_committed"]})
+    later = sorted(set(fp["components"]) - set(compared))
     lines += ["", f"Measured {doc['date']} with `python tools/cross_cpu.py` ({doc['qemu']}); components "
-              f"{', '.join(sorted(fp['components']))}; libraries {libs}."]
+              f"{', '.join(compared)}; libraries {libs}."
+              + (f" Added to the fingerprint since, not yet run on these CPUs: {', '.join(later)} (`make cross-cpu`)."
+                 if later else "")]
     return "\n".join(lines)
 
 
