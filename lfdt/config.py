@@ -1,6 +1,6 @@
 """Typed, validated schema of ``params.yaml``.
 
-Every stage loads the file through :func:`load_params` before any compute: an unknown key,
+Every stage loads the file through :func:`load_params` before any compute: an unknown key, a missing one,
 a wrong type or an impossible value raises :class:`ParamsError` naming the key and the value.
 """
 
@@ -11,10 +11,15 @@ from typing import Annotated, Any, ClassVar, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic.fields import FieldInfo
 
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
-PosInt = Annotated[int, Field(gt=0)]
+MAX_COUNT = 2**31 - 1
+"""Largest size or count a param may take: numpy, torch and MuJoCo index with 32-bit integers, and a larger value
+(``1e29`` written as an integer) would fail a stage after DVC removed its outputs, not in preflight."""
+PosInt = Annotated[int, Field(gt=0, le=MAX_COUNT)]
+Count = Annotated[int, Field(ge=0, le=MAX_COUNT)]
 Fraction = Annotated[float, Field(gt=0, lt=1)]
 XY = Annotated[list[float], Field(min_length=2, max_length=2)]
 PosXY = Annotated[list[PosFloat], Field(min_length=2, max_length=2)]
@@ -173,7 +178,7 @@ class ExpertsConfig(Strict):
     """Minibatch size of a gradient step."""
     buffer_size: PosInt = 300_000
     """Replay buffer capacity, transitions."""
-    learning_starts: Annotated[int, Field(ge=0)] = 5_000
+    learning_starts: Count = 5_000
     """Environment steps of random actions before learning starts."""
     gamma: Fraction = 0.97
     """Discount factor."""
@@ -297,6 +302,14 @@ class DemosConfig(Strict):
     seed: Annotated[int, Field(ge=0, le=9)] = 0
     """Collection seed."""
 
+    @model_validator(mode="after")
+    def _attempts(self) -> DemosConfig:
+        # the stage gives up after max_attempts attempts: it could never keep more demonstrations than that
+        if self.per_pairing > self.max_attempts:
+            raise ValueError(f"per_pairing ({self.per_pairing}) is more than max_attempts ({self.max_attempts}): "
+                             "collect_demos would give up before it has them")
+        return self
+
 
 class DynamicsConfig(Strict):
     """Forward and inverse dynamics models of domain Y (paper: 4 FC layers of 256, leaky ReLU, Adam 3e-4)."""
@@ -414,7 +427,7 @@ class TranslatorConfig(Strict):
     expects translation to account for such differences). False: with the hand itself."""
     gan_loss: Literal["bce", "lsgan"] = "bce"
     """Non-saturating BCE-with-logits as in eq. 1, or least squares."""
-    history_size: Annotated[int, Field(ge=0)] = 0
+    history_size: Count = 0
     """Pool of past generated states shown to D (0 = none; Cycle-Dynamics uses 128)."""
     d_lr_scale: PosFloat = 1.0
     """D's learning rate is this times G's (1 = the paper's one learning rate; Cycle-Dynamics: 10)."""
@@ -462,7 +475,7 @@ class TrackConfig(Strict):
     a_t = F^-1(y_t, y_hat_t+1) from the state actually reached."""
     gain: Annotated[float, Field(gt=0, le=1)] = 1.0
     """Share of the distance to the next translated end position the Jacobian controller asks for in one step."""
-    settle_steps: Annotated[int, Field(ge=0)] = 10
+    settle_steps: Count = 10
     """Control steps after the demonstration's last target, holding it, for the box to come to rest."""
     success_only: bool = True
     """Keep only the executions that solve the task (False keeps every execution: for smoke runs with untrained
@@ -505,7 +518,7 @@ class EvaluationConfig(Strict):
     start_states: Literal["evaluation", "development"] = "evaluation"
     """Seed block of the start states: 'evaluation' (the reported Table I) or 'development' (a disjoint block for
     choosing settings, e.g. `dvc exp run -S evaluation.start_states=development`)."""
-    videos: Annotated[int, Field(ge=0)] = 2
+    videos: Count = 2
     """Rollout videos (mp4) of the first trials of each config."""
     video_size: Annotated[int, Field(ge=64, le=640)] = 240
     """Video frame width and height, pixels."""
@@ -533,7 +546,7 @@ class TwinParams(Strict):
     trials: PosInt = 50
     """Evaluation trials per task, method and seed, from the same start states (the paper: 10 real trials, too few
     to tell 80 % from 100 %)."""
-    videos: Annotated[int, Field(ge=0)] = 1
+    videos: Count = 1
     """Rollout videos per task and method."""
     seeds: list[Annotated[int, Field(ge=0, le=9)]] = Field(default=[3, 4, 5], min_length=1)
     """Seeds of the twin's data, dynamics, translator and BC, one whole run each (backend 'real': the robots'
@@ -632,6 +645,29 @@ class ParamsError(ValueError):
     """params.yaml failed validation; the message names each offending key and value."""
 
 
+def _field(loc: tuple) -> FieldInfo | None:
+    """The schema field at an error's location (None inside a list or a free-form mapping)."""
+    model: Any = Params
+    field = None
+    for part in loc:
+        if not (isinstance(model, type) and issubclass(model, BaseModel)) or part not in model.model_fields:
+            return None
+        field = model.model_fields[part]
+        model = field.annotation
+    return field
+
+
+def _accepted(field: FieldInfo | None) -> str:
+    """What a number field accepts, as a note to its error: ' (accepted: an integer > 0 and <= 2147483647)'."""
+    kind = {int: "an integer", float: "a number"}.get(field.annotation) if field is not None else None
+    if kind is None:
+        return ""
+    bounds = [f"{op} {getattr(m, attr)}" for m in field.metadata
+              for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+              if getattr(m, attr, None) is not None]
+    return f" (accepted: {kind}{' ' + ' and '.join(bounds) if bounds else ''})"
+
+
 def _format_errors(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
@@ -642,8 +678,45 @@ def _format_errors(err: ValidationError) -> str:
             lines.append(f"  {key}: {msg}")
             continue
         shown = repr(value)
-        lines.append(f"  {key} = {shown if len(shown) <= 80 else shown[:77] + '...'}: {msg}")
+        lines.append(f"  {key} = {shown if len(shown) <= 80 else shown[:77] + '...'}: {msg}"
+                     f"{_accepted(_field(e['loc']))}")
     return "invalid params:\n" + "\n".join(lines)
+
+
+def missing_keys(raw: dict, model: type[BaseModel] = Params, prefix: str = "") -> list[str]:
+    """The schema's keys that ``raw`` leaves out, dotted; a missing section is named once, not key by key."""
+    out = []
+    for name, field in model.model_fields.items():
+        if name not in raw:
+            out.append(prefix + name)
+        elif isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel) \
+                and isinstance(raw[name], dict):
+            out += missing_keys(raw[name], field.annotation, f"{prefix}{name}.")
+    return out
+
+
+def _default_of(key: str) -> Any:
+    value: Any = Params()
+    for part in key.split("."):
+        value = getattr(value, part)
+    return value
+
+
+def require_complete(raw: dict, source: str | Path) -> None:
+    """ParamsError naming every key of the schema that ``raw`` (read from ``source``) leaves out. A stage would use
+    lfdt/config.py's default in its place without a word (and DVC reruns it for the deleted line), so params files
+    write every key out, as the repository's params.yaml (rendered from the schema) does."""
+    missing = missing_keys(raw)
+    if not missing:
+        return
+    named = []
+    for key in missing[:6]:
+        default = _default_of(key)
+        named.append(f"section {key}" if isinstance(default, BaseModel) else f"{key} (default {_yaml_scalar(default)})")
+    more = f" and {len(missing) - 6} more" if len(missing) > 6 else ""
+    raise ParamsError(f"invalid params: {source} lacks {', '.join(named)}{more}: every key must be written out, as in "
+                      "the repository's params.yaml (a stage would otherwise use lfdt/config.py's default without a "
+                      "word)")
 
 
 def validate_params(raw: dict | None) -> Params:
@@ -657,7 +730,7 @@ def validate_params(raw: dict | None) -> Params:
 
 
 def load_params(path: str | Path = "params.yaml") -> Params:
-    """Read and validate params.yaml."""
+    """Read and validate params.yaml: every value valid and every key present (:func:`require_complete`)."""
     path = Path(path)
     if not path.exists():
         raise ParamsError(f"params file {path} does not exist")
@@ -665,7 +738,9 @@ def load_params(path: str | Path = "params.yaml") -> Params:
         raw = read_yaml(path)
     except yaml.YAMLError as err:
         raise ParamsError(f"{path} is not valid YAML: {err}") from None
-    return validate_params(raw)
+    params = validate_params(raw)  # first: a wrong value or an unknown key is named before a missing one
+    require_complete(raw, path)
+    return params
 
 
 def read_yaml(path: str | Path) -> dict:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,7 @@ import pyarrow.parquet as pq
 
 from lfdt import layout
 from lfdt.errors import StageError
-from lfdt.files import temp_path
+from lfdt.files import write_atomic
 
 META_KEY = b"lfdt"
 INDEX_COLUMNS = ("episode_index", "frame_index", "timestamp")
@@ -103,12 +102,8 @@ def transitions_table(schema: pa.Schema, episode_index: np.ndarray, frame_index:
 
 
 def write_table(table: pa.Table, path: str | Path) -> Path:
-    """Write a Parquet file atomically."""
-    path = Path(path)
-    tmp = temp_path(path)
-    pq.write_table(table, tmp, compression="zstd")
-    os.replace(tmp, path)
-    return path
+    """Write a Parquet file atomically (an OSError, a full disk, is an OutputError naming ``path``)."""
+    return write_atomic(path, lambda tmp: pq.write_table(table, tmp, compression="zstd"))
 
 
 def _first_file(path: str | Path) -> Path:
@@ -140,13 +135,22 @@ class DataFileError(StageError, ValueError):
     """A data file that cannot be read, or is not the kind, domain or task its reader needs; names the file."""
 
 
+class MissingDataFile(DataFileError, FileNotFoundError):
+    """A data file that is not there (still a FileNotFoundError for the callers that catch one)."""
+
+
 @contextlib.contextmanager
 def _readable(path: str | Path) -> Iterator[None]:
-    """Turn Arrow's and the OS's read errors into a DataFileError that names the file (a missing file stays one)."""
+    """Turn Arrow's and the OS's read errors into a DataFileError that names the file (a missing file: a
+    MissingDataFile)."""
     try:
         yield
-    except FileNotFoundError:
+    except MissingDataFile:
         raise
+    except FileNotFoundError as e:
+        if e.errno is None:  # ours (`no Parquet files in <folder>`): its message says it
+            raise MissingDataFile(str(e)) from None
+        raise MissingDataFile(f"{path} is missing: run the stage that writes it (`dvc repro`)") from None
     except (pa.ArrowException, OSError) as e:
         raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
 

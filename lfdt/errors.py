@@ -8,3 +8,7 @@ class StageError(Exception):
 
 class DeviceError(StageError):
     """params.yaml names a torch device this machine does not have."""
+
+
+class OutputError(StageError):
+    """An output could not be written (a full disk, no permission, a read-only file system); names the file."""

@@ -8,7 +8,6 @@ import contextlib
 import csv
 import json
 import numbers
-import os
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
@@ -19,7 +18,7 @@ from tqdm import tqdm
 from lfdt import mlflow_runs
 from lfdt.config import Params, ParamsError, load_params
 from lfdt.errors import StageError
-from lfdt.files import temp_path
+from lfdt.files import write_atomic
 
 
 def params(path: str | Path = "params.yaml") -> Params:
@@ -27,9 +26,22 @@ def params(path: str | Path = "params.yaml") -> Params:
     return load_params(path)
 
 
+def describe_os_error(err: OSError) -> str:
+    """An OSError as one line that names its file where the OS gave one (``{path}: No space left on device``)."""
+    if err.filename is None:
+        return str(err)
+    files = f"{err.filename} -> {err.filename2}" if err.filename2 is not None else str(err.filename)
+    return f"{files}: {err.strerror or err}"
+
+
+INTERRUPTED = 130
+"""Exit code of a stage stopped by Ctrl-C (128 + SIGINT), as a shell reports it."""
+
+
 def main(fn: Callable[[], None]) -> None:
     """Run a stage's main; a params problem or a :class:`~lfdt.errors.StageError` (a wrong data file, an unreachable
-    tracking server, a diverged training) exits 2 with its message; anything else raises (non-zero exit).
+    tracking server, a diverged training) exits 2 with its message, as does an OSError (a missing input, a full disk:
+    :func:`describe_os_error`); Ctrl-C exits :data:`INTERRUPTED` with one line; anything else raises (non-zero exit).
 
     The stage ends within a second of the `dvc repro` that started it (:func:`lfdt.lifeline.watch`; its workers end
     with it), and holds a lock on its command line in this workspace while it runs, so that a rerun never writes
@@ -43,15 +55,19 @@ def main(fn: Callable[[], None]) -> None:
     except (ParamsError, StageError) as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        print("error: interrupted (Ctrl-C): the stage's outputs are incomplete; `dvc repro` reruns it",
+              file=sys.stderr)
+        sys.exit(INTERRUPTED)
+    except OSError as err:  # the environment, not the code: one line naming the file (a traceback says no more)
+        print(f"error: {describe_os_error(err)}", file=sys.stderr)
+        sys.exit(2)
 
 
 def write_json(path: str | Path, obj: Any) -> Path:
     """Write JSON atomically (small metrics files)."""
-    path = Path(path)
-    tmp = temp_path(path)
-    tmp.write_text(json.dumps(obj, indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
-    return path
+    text = json.dumps(obj, indent=2, sort_keys=False) + "\n"
+    return write_atomic(path, lambda tmp: tmp.write_text(text))
 
 
 REPORTS = Path("reports")
@@ -133,15 +149,15 @@ def write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]]) -> Path:
     they first appear; a row without a column leaves its cell empty (e.g. a curve's rows logged at different
     intervals)."""
     rows = list(rows)
-    path = Path(path)
-    tmp = temp_path(path)
-    with open(tmp, "w", newline="") as fh:
-        if rows:
-            w = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)), restval="")
-            w.writeheader()
-            w.writerows(rows)
-    os.replace(tmp, path)
-    return path
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "w", newline="") as fh:
+            if rows:
+                w = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for r in rows for k in r)), restval="")
+                w.writeheader()
+                w.writerows(rows)
+
+    return write_atomic(path, write)
 
 
 def wall_since_start() -> float:

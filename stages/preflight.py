@@ -1,26 +1,37 @@
 """DVC stage: check what every later stage reads from outside the data, before `dvc repro` runs (and so removes the
-outputs of) any of them: params.yaml is valid, and the tracking store (MLFLOW_TRACKING_URI, or the workspace's
-mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place. DVC runs
-it when params.yaml or its code changes (and with -f); it tracks no environment variable, so a new
+outputs of) any of them: params.yaml is valid and complete, what a stage would refuse in valid params
+(:func:`check_runnable`: the torch device), and the tracking store (MLFLOW_TRACKING_URI, or the
+workspace's mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place.
+DVC runs it when params.yaml or its code changes (and with -f); it tracks no environment variable, so a new
 MLFLOW_TRACKING_URI alone is checked by each stage as it starts.
 
 The file it writes says only that the check passed, the same bytes whatever the params: a later stage depends on it
 for the order of the DAG, and is rerun for its own params, never for this file."""
 
 from lfdt import mlflow_runs, stage
+from lfdt.config import Params
+from lfdt.files import write_atomic
 from lfdt.reach import redact
 
 PASSED = "params and tracking store checked (stages/preflight.py)\n"
 """The whole of the output: constant, so that no stage downstream reruns because this one did."""
 
 
+def check_runnable(p: Params) -> None:
+    """What a stage would refuse in params that lfdt.config accepts (every value valid, every key present): the
+    torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`)."""
+    if p.device != "cpu":  # torch loads in seconds: only when there is a device to look for
+        from lfdt.nets import torch_device
+
+        torch_device(p.device)
+
+
 def run() -> None:
     args = stage.parser(__doc__, {"out": "the file that says the checks passed"}).parse_args()
-    stage.params(args.params)
+    check_runnable(stage.params(args.params))
     uri = mlflow_runs.tracking_uri()
     mlflow_runs.check_tracking_uri(uri)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(PASSED)
+    write_atomic(args.out, lambda tmp: tmp.write_text(PASSED))
     print(f"preflight: {args.params} valid; tracking store {redact(uri)} usable")
 
 

@@ -50,6 +50,9 @@ def test_params_yaml_is_what_the_schema_renders():
     ({"env": {"timestep": float("inf")}}, "env.timestep", "inf"),
     ({"translator": {"lambda_dyn": float("nan")}}, "translator.lambda_dyn", "nan"),
     ({"env": {"box": {"mass": float("-inf")}}}, "env.box.mass", "-inf"),
+    ({"demos": {"per_pairing": 1e29}}, "demos.per_pairing", "accepted: an integer > 0 and <= 2147483647"),
+    ({"demos": {"per_pairing": 10**29}}, "demos.per_pairing", "accepted: an integer > 0 and <= 2147483647"),
+    ({"demos": {"per_pairing": 3_000}}, "demos", "more than max_attempts (2000)"),
 ])
 def test_bad_values_name_key_and_value(raw, key, value):
     with pytest.raises(ParamsError) as err:
@@ -128,3 +131,22 @@ def test_twin_start_states_name_a_seed_block():
     assert validate_params({"twin": {"start_states": "development"}}).twin.start_states == "development"
     with pytest.raises(ParamsError, match="start_states"):
         validate_params({"twin": {"start_states": "training"}})
+
+
+@pytest.mark.parametrize("path, says", [
+    (["bc", "iterations"], "lacks bc.iterations (default 8000)"),
+    (["twin", "bc", "iterations"], "lacks twin.bc.iterations (default 4000)"),
+    (["bc"], "lacks section bc"),
+])
+def test_a_missing_key_is_an_error_not_the_code_default(tmp_path, path, says):
+    """A key deleted from params.yaml would otherwise rerun its stages on lfdt/config.py's default, without a word."""
+    raw = yaml.safe_load((ROOT / "params.yaml").read_text())
+    section = raw
+    for key in path[:-1]:
+        section = section[key]
+    del section[path[-1]]
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(raw, sort_keys=False))
+    with pytest.raises(ParamsError) as err:
+        load_params(params)
+    assert f"{params} {says}" in str(err.value) and "\n" not in str(err.value)

@@ -73,7 +73,7 @@ def test_a_cuda_index_beyond_the_machine_is_a_clear_error(monkeypatch):
 ])
 def test_every_training_stage_stops_on_a_missing_device_before_any_work(tmp_path, args):
     params = tmp_path / "params.yaml"
-    params.write_text("device: cuda\n")
+    params.write_text((ROOT / "params.yaml").read_text().replace("device: cpu", "device: cuda", 1))
     env = {**os.environ, "CUDA_VISIBLE_DEVICES": "", "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db"}
     proc = subprocess.run([sys.executable, str(ROOT / args[0]), *args[1:], "--params", str(params)], cwd=tmp_path,
                           env=env, capture_output=True, text=True, timeout=120)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import smoke
 import yaml
 
 from lfdt import data
@@ -84,7 +85,8 @@ def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
 def test_killed_training_resumes_where_it_stopped(tmp_path):
     params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
               "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]}}
-    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
+    full = yaml.safe_load((ROOT / "params.yaml").read_text())  # a stage takes only a complete params file
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(smoke.merge(full, params)))
     cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--experts", "models/experts",  # both pairings
            "--checkpoints", "checkpoints/experts", "--reports", "reports/experts"]
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path / 'mlflow.db'}"}

@@ -1,11 +1,14 @@
 """Hostile input to the stages: a damaged data file, model or tracking store ends the stage with exit code 2 and one
-line that names the file, column or URI and what was expected, before any output is written. Each case copies what
-it damages from the smoke project's outputs into its own folder and runs the stage's script in this process (no
-interpreter to start per case); a new case is one row of :data:`CASES`.
+line that names the file, column or URI and what was expected, before any output is written; so does a full disk
+(naming the file), and Ctrl-C is one line too (exit code 130). Each case copies what it damages from the smoke
+project's outputs into its own folder and runs the stage's script in this process (no interpreter to start per case);
+a new case is one row of :data:`CASES`.
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import runpy
 import shutil
 import sys
@@ -47,6 +50,10 @@ class Case:
     says: str
     """What the one error line must contain (``{case}`` stands for this case's folder)."""
     env: dict[str, str] = field(default_factory=dict)
+    fault: Callable[[pytest.MonkeyPatch], None] | None = None
+    """What goes wrong around the stage while it runs (a full disk, Ctrl-C), patched in for the case."""
+    code: int = 2
+    """The stage's exit code."""
 
 
 def _random(root: Path, tmp: Path, change=None) -> list[str]:
@@ -57,10 +64,12 @@ def _random(root: Path, tmp: Path, change=None) -> list[str]:
             str(tmp / "reports/dynamics.json"), "--curve", str(tmp / "reports/curve.csv")]
 
 
-def _demos(root: Path, tmp: Path, change=None, twin: bool = False) -> list[str]:
+def _demos(root: Path, tmp: Path, change=None, twin: bool = False, missing: str | None = None) -> list[str]:
     (tmp / "demos").mkdir()
     for pairing in ("R1H", "HR2"):
         src = root / "data/demos" / f"{pairing}.parquet"
+        if pairing == missing:
+            continue
         if twin:  # a twin recording (a folder of episodes of another task) given as the box push's demonstrations
             shutil.copytree(root / "data/twin/peg_insertion/s0" / f"demos_{pairing}", tmp / "demos" / src.name)
         elif change and pairing == "R1H":
@@ -87,6 +96,24 @@ def _store(root: Path, tmp: Path) -> list[str]:
 
 CORRUPT_DB = "corrupt.db"
 
+
+def _raise(exc: BaseException) -> Callable[..., None]:
+    def fail(*args, **kwargs) -> None:
+        raise exc
+    return fail
+
+
+def _full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every Parquet write fails as on a full disk: the OS's error names no file."""
+    monkeypatch.setattr(pq, "write_table", _raise(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
+
+
+def _ctrl_c(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C while the stage draws its demonstration subsets."""
+    from lfdt import data
+
+    monkeypatch.setattr(data, "demo_subset", _raise(KeyboardInterrupt()))
+
 CASES = {
     "dynamics-zero-rows": Case("stages/fit_dynamics.py", lambda r, t: _random(r, t, lambda tb: tb.slice(0, 0)),
                                "{case}/random/Y.parquet: holds no transitions (0 rows)"),
@@ -100,6 +127,11 @@ CASES = {
     "demos-from-the-twin": Case("stages/select_demos.py", lambda r, t: _demos(r, t, twin=True),
                                 "{case}/demos/R1H.parquet holds demos data of domain R1H (task 'peg_insertion' "
                                 "where 'box_push' is needed)"),
+    "demos-pairing-missing": Case("stages/select_demos.py", lambda r, t: _demos(r, t, missing="HR2"),
+                                  "{case}/demos/HR2.parquet is missing"),
+    "full-disk": Case("stages/select_demos.py", _demos, "raw_R1H.parquet: cannot write it: No space left on device",
+                      fault=_full_disk),
+    "ctrl-c": Case("stages/select_demos.py", _demos, "interrupted (Ctrl-C)", fault=_ctrl_c, code=130),
     "policy-truncated": Case("stages/evaluate.py", lambda r, t: _policies(r, t, _truncate),
                              "{case}/policies/lfdt-d3/s0/pi.pt is not a saved state dict"),
     "policy-of-another-model": Case("stages/evaluate.py",
@@ -139,13 +171,16 @@ def test_a_damaged_input_is_one_named_error_before_any_output(name, smoke_projec
         monkeypatch.setenv(key, value.format(case=tmp_path))
     monkeypatch.chdir(root)  # the stages find their workspace (and its tracking store) from here
     monkeypatch.setattr(sys, "argv", [case.script, *args, "--params", str(params)])
+    if case.fault is not None:
+        case.fault(monkeypatch)
     with pytest.raises(SystemExit) as exit_:
         runpy.run_path(str(root / case.script), run_name="__main__")
     err = capsys.readouterr().err
     errors = [line for line in err.splitlines() if line.startswith("error: ")]
-    assert exit_.value.code == 2, err[-3000:]
+    assert exit_.value.code == case.code, err[-3000:]
     assert len(errors) == 1 and "Traceback" not in err, err[-3000:]
     assert case.says.format(case=tmp_path) in errors[0], errors[0]
     assert "secret" not in err
-    written = [p for p in (tmp_path / "out", tmp_path / "reports") if p.exists() and any(p.rglob("*"))]
+    written = [p for p in (tmp_path / "out", tmp_path / "reports")
+               if p.exists() and any(f.is_file() for f in p.rglob("*"))]  # an empty folder is no output
     assert not written, f"the stage wrote {written} before failing"
