@@ -12,3 +12,8 @@ class DeviceError(StageError):
 
 class OutputError(StageError):
     """An output could not be written (a full disk, no permission, a read-only file system); names the file."""
+
+
+class InputError(StageError):
+    """A user-given file, folder or argument that cannot be used as it is (:mod:`lfdt.inputs`); names it and what
+    was expected."""

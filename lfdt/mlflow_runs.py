@@ -20,8 +20,8 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from lfdt import lifeline, numerics
-from lfdt.errors import StageError
+from lfdt import inputs, lifeline, numerics
+from lfdt.errors import InputError, StageError
 from lfdt.files import process_alive
 from lfdt.reach import Unreachable, check, redact
 
@@ -31,6 +31,14 @@ EXPERIMENT_KIND_TAG, EXPERIMENT_KIND = "mlflow.experimentKind", "custom_model_de
 PROBE_TIMEOUT_S = 5.0
 """How long a tracking server may take to answer the first request before the stage stops."""
 DEFAULT_EXPERIMENT = "lfdt"
+MAX_EXPERIMENT_NAME = 256
+"""The longest experiment name every store keeps: MLflow's SQL stores declare ``experiments.name`` VARCHAR(256)
+(PostgreSQL and MySQL refuse a longer one; MLflow's own check allows 500)."""
+FIRST_QUERY_HTTP = {"MLFLOW_HTTP_REQUEST_MAX_RETRIES": "1", "MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR": "1",
+                    "MLFLOW_HTTP_REQUEST_BACKOFF_JITTER": "0", "MLFLOW_HTTP_REQUEST_TIMEOUT": str(int(PROBE_TIMEOUT_S))}
+"""MLflow's HTTP settings for a stage's first query of a tracking server, where the user has not set them: one
+retry, :data:`PROBE_TIMEOUT_S` each. MLflow's defaults (7 retries with growing pauses, 120 s each) make a server
+that answers 5xx look like minutes of silence; later calls keep them, to ride out a server's restart mid-stage."""
 _BATCH = 900  # MLflow accepts at most 1000 metrics per log_batch call
 
 
@@ -63,8 +71,15 @@ def tracking_uri() -> str:
     return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{workspace_root() / 'mlflow.db'}"
 
 
-class TrackingUnavailable(StageError):
-    """The tracking server named by MLFLOW_TRACKING_URI does not answer."""
+class TrackingUnavailable(InputError):
+    """The tracking store named by MLFLOW_TRACKING_URI (or the workspace's mlflow.db) cannot be used."""
+
+
+def experiment_name() -> str:
+    """The experiment the stages log to: ``$LFDT_MLFLOW_EXPERIMENT``, else 'lfdt'; one longer than
+    :data:`MAX_EXPERIMENT_NAME` characters (or with a control character) raises InputError naming the variable."""
+    return inputs.env_text(EXPERIMENT_ENV, DEFAULT_EXPERIMENT, MAX_EXPERIMENT_NAME,
+                           "the length of an experiment name in MLflow's tracking database")
 
 
 SQLITE_HEADER = b"SQLite format 3\x00"
@@ -75,14 +90,15 @@ DATABRICKS = ("databricks", "databricks-uc", "uc")
 """Tracking URIs of Databricks (bare, or ``databricks://<profile>``): MLflow's client finds their host itself."""
 
 
-def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
+def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S, thorough: bool = False) -> None:
     """Check the tracking store ``uri`` before any run is opened; TrackingUnavailable names it and what is wrong.
 
     * ``sqlite:///path``: no query string (MLflow would open another, empty store), the folder exists and can be
-      written, and an existing file is an SQLite database;
+      written, and an existing file is an SQLite database that answers a query (:func:`lfdt.inputs.sqlite_answers`;
+      ``thorough``: every page is read, as preflight does);
     * ``postgresql://`` and the other database servers: the driver is installed, and the server accepts a connection
       within ``timeout`` seconds (:mod:`lfdt.reach`);
-    * ``http(s)://``: the server answers on /health within ``timeout`` seconds;
+    * ``http(s)://``: the server answers on /health within ``timeout`` seconds, and not with 5xx;
     * anything else (``file:`` stores, ``ftp://``, a mistyped scheme): refused, naming the schemes that work.
     """
     if uri.lower() in DATABRICKS:
@@ -92,7 +108,7 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
     if base in ("http", "https"):
         _check_server(uri, timeout)
     elif base == "sqlite":
-        _check_sqlite(uri)
+        _check_sqlite(uri, thorough)
     elif base in DB_SCHEMES:
         _check_database(uri, timeout)
     elif base not in DATABRICKS:
@@ -103,29 +119,13 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S) -> None:
 
 
 def _check_server(uri: str, timeout: float) -> None:
-    import ssl
-    import urllib.error
-    import urllib.request
-    from urllib.parse import urlsplit, urlunsplit
-
-    parts = urlsplit(uri)
-    # user:password@ is MLflow's basic auth, not part of the address urllib connects to
-    netloc = parts.netloc.rsplit("@", 1)[-1]
-    probe = urlunsplit((parts.scheme, netloc, parts.path.rstrip("/") + "/health", "", ""))
-    try:
-        urllib.request.urlopen(probe, timeout=timeout).close()
-    except urllib.error.HTTPError:
-        return  # something answers (a proxy or another server version): let MLflow's client take it from here
-    except (urllib.error.URLError, OSError, ValueError) as e:
-        reason = getattr(e, "reason", e)
-        if isinstance(reason, ssl.SSLError):
-            return  # something answers over TLS; MLflow's client checks the certificate its own way (its CA settings)
-        raise TrackingUnavailable(f"the MLflow tracking server MLFLOW_TRACKING_URI={redact(uri)} does not answer "
-                                  f"within {timeout:g} s ({reason}); start it, or unset MLFLOW_TRACKING_URI to use "
-                                  f"{workspace_root() / 'mlflow.db'}") from None
+    # a 4xx (a proxy, another server version) is an answer: MLflow's client takes it from there; 5xx is a server down
+    inputs.http_answers(uri, f"the MLflow tracking server MLFLOW_TRACKING_URI={redact(uri)}", timeout, "/health",
+                        f"start it, or unset MLFLOW_TRACKING_URI to use {workspace_root() / 'mlflow.db'}",
+                        error=TrackingUnavailable)
 
 
-def _check_sqlite(uri: str) -> None:
+def _check_sqlite(uri: str, thorough: bool = False) -> None:
     if "?" in uri:
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: a query string is not supported (MLflow would open "
                                   "another, empty store); give the database's path alone, sqlite:////path/mlflow.db")
@@ -150,6 +150,8 @@ def _check_sqlite(uri: str) -> None:
                                       "another kind of file); move it aside and the next stage starts a new store")
         if not os.access(path, os.W_OK):
             raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: {path} cannot be written")
+        if head:
+            inputs.sqlite_answers(path, f"MLFLOW_TRACKING_URI={uri}", thorough, error=TrackingUnavailable)
     elif not os.access(folder, os.W_OK):
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: the folder {folder} cannot be written")
 
@@ -222,6 +224,18 @@ def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 @contextlib.contextmanager
+def bounded_http() -> Iterator[None]:
+    """MLflow's HTTP calls inside retry little (:data:`FIRST_QUERY_HTTP`, where the user set nothing else)."""
+    unset = {k: v for k, v in FIRST_QUERY_HTTP.items() if k not in os.environ}
+    os.environ.update(unset)
+    try:
+        yield
+    finally:
+        for k in unset:
+            os.environ.pop(k, None)
+
+
+@contextlib.contextmanager
 def _file_lock(path: Path) -> Iterator[None]:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as fh:
@@ -249,16 +263,17 @@ def experiment_id(name: str | None = None) -> str:
     import mlflow
     from mlflow.exceptions import MlflowException
 
-    name = name or os.environ.get(EXPERIMENT_ENV, DEFAULT_EXPERIMENT)
+    name = name or experiment_name()
     uri = tracking_uri()
     check_tracking_uri(uri)
     mlflow.set_tracking_uri(uri)
     lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
-        client = mlflow.MlflowClient()
         try:
-            exp = client.get_experiment_by_name(name)
+            client = mlflow.MlflowClient()  # opens a database store (its schema checked, migrated)
+            with bounded_http():  # a server that fails every request: one line within seconds, not minutes
+                exp = client.get_experiment_by_name(name)
         except Exception as err:  # noqa: BLE001 - any failure of the first query means the store is unusable
             first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
             raise TrackingUnavailable(f"the MLflow tracking store MLFLOW_TRACKING_URI={redact(uri)} cannot be read "

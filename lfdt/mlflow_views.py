@@ -15,6 +15,7 @@ import sys
 from dataclasses import dataclass
 
 from lfdt import mlflow_runs
+from lfdt.errors import StageError
 
 SHARED_VIEW_TAG = "mlflow.sharedViewState."
 """Prefix of the experiment tags MLflow's UI reads a shared runs-table view from (MLflow 3)."""
@@ -131,7 +132,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ui", default="http://127.0.0.1:5000", help="where the MLflow UI is (for the printed URLs)")
     args = ap.parse_args(argv)
-    exp_id, urls = install()
+    try:
+        exp_id, urls = install()
+    except StageError as err:  # the store or LFDT_MLFLOW_EXPERIMENT: one line naming it, as a stage says it
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     print(f"MLflow views in {mlflow_runs.tracking_uri()}:")
     print(f"  the experiment's runs\n    {args.ui.rstrip('/')}/#/experiments/{exp_id}?{ML_WORKFLOW}")
     for frag, (view, _) in urls.items():

@@ -38,6 +38,9 @@ import os
 import platform
 import sys
 
+from lfdt.errors import InputError
+from lfdt.inputs import env_choice
+
 SWITCH = "LFDT_NUMERICS"
 """Environment variable: ``pinned`` (default) or ``native`` (each library picks its own kernels)."""
 
@@ -63,11 +66,8 @@ class NumericsError(ImportError):
 
 
 def mode() -> str:
-    """``pinned`` or ``native``, from :data:`SWITCH`."""
-    value = os.environ.get(SWITCH, "pinned").strip().lower() or "pinned"
-    if value not in MODES:
-        raise NumericsError(f"{SWITCH}={os.environ[SWITCH]!r}: expected one of {', '.join(MODES)}")
-    return value
+    """``pinned`` or ``native``, from :data:`SWITCH`; another value raises :class:`~lfdt.errors.InputError`."""
+    return env_choice(SWITCH, MODES, "pinned")
 
 
 def pinned() -> bool:
@@ -133,4 +133,11 @@ def describe() -> dict[str, str]:
     return out
 
 
-pin()
+try:
+    pin()
+except InputError as err:
+    # a wrong value of the switch: every number of this process would depend on it, and no caller can do better than
+    # stop. The program's entry point (lfdt.stage.main, a CLI's main) is not imported yet, so this is its one line
+    # and exit code 2; SystemExit, unlike an ImportError, prints no traceback
+    print(f"error: {err}", file=sys.stderr)
+    raise SystemExit(2) from None

@@ -81,9 +81,34 @@ class PolicyModel(mlflow.pyfunc.PythonModel):
         if missing:
             raise ValueError(f"the observations lack the state columns {missing} of {self.task}'s domain Y "
                              f"(expected {self.state_columns})")
-        obs = frame[self.state_columns].to_numpy(dtype=np.float64)
+        obs = observations(frame, self.state_columns, self.task)
         actions = np.stack([self.policy(y) for y in obs]) if len(obs) else np.zeros((0, len(self.action_columns)))
         return pd.DataFrame(actions, columns=self.action_columns)
+
+
+def observations(frame: pd.DataFrame, columns: list[str], task: str) -> np.ndarray:
+    """The ``columns`` of ``frame`` as floats, every one finite: a NaN or an infinity (a sensor that dropped out, a
+    null in a JSON request) would come back as NaN actions, which a robot cannot take. MlflowException (MLflow's
+    server answers it with 400) naming the first bad cell's column and row otherwise."""
+    from mlflow.exceptions import MlflowException
+
+    part = frame[columns]
+    try:
+        obs = part.to_numpy(dtype=np.float64)
+    except (TypeError, ValueError):
+        numeric = part.apply(pd.to_numeric, errors="coerce")
+        bad = numeric.isna() & part.notna()
+        row, col = np.argwhere(bad.to_numpy())[0]
+        raise MlflowException.invalid_parameter_value(
+            f"observation row {row}, column {columns[col]!r}: {part.iat[row, col]!r} is not a number; expected "
+            f"finite numbers in {task}'s state columns {columns}") from None
+    bad = ~np.isfinite(obs)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise MlflowException.invalid_parameter_value(
+            f"observation row {row}, column {columns[col]!r} is {obs[row, col]} ({int(bad.sum())} cells of "
+            f"{bad.size} are not finite); expected finite numbers in {task}'s state columns")
+    return obs
 
 
 def input_example(task: str) -> pd.DataFrame:
@@ -131,11 +156,27 @@ def log_policy(policy_dir: Path, *, run_id: str, task: str, method: str, seed: i
 def policy_from_uri(uri: str, task: str, method: str) -> bc.BCPolicy:
     """The policy behind a ``models:/`` or ``runs:/`` URI, checked to be ``task``'s ``method``; ValueError naming
     the model's own task and method otherwise. The registry is the project's tracking store
-    (:func:`lfdt.mlflow_runs.tracking_uri`: ``MLFLOW_TRACKING_URI``, else the workspace's mlflow.db)."""
-    from lfdt.mlflow_runs import tracking_uri
+    (:func:`lfdt.mlflow_runs.tracking_uri`: ``MLFLOW_TRACKING_URI``, else the workspace's mlflow.db), or
+    ``MLFLOW_REGISTRY_URI`` where set; either not answering is a ValueError naming it within seconds
+    (:func:`lfdt.mlflow_runs.check_tracking_uri`), where MLflow's client would retry for minutes."""
+    import os
 
-    mlflow.set_tracking_uri(tracking_uri())
-    model = mlflow.pyfunc.load_model(uri)
+    from lfdt.mlflow_runs import TrackingUnavailable, bounded_http, check_tracking_uri, tracking_uri
+
+    store = tracking_uri()
+    try:
+        check_tracking_uri(store)
+        registry_uri = os.environ.get("MLFLOW_REGISTRY_URI")
+        if registry_uri and registry_uri != store:
+            try:
+                check_tracking_uri(registry_uri)
+            except TrackingUnavailable as err:  # the same checks, for the other variable
+                raise TrackingUnavailable(str(err).replace("MLFLOW_TRACKING_URI", "MLFLOW_REGISTRY_URI")) from None
+    except TrackingUnavailable as err:
+        raise ValueError(str(err)) from None
+    mlflow.set_tracking_uri(store)
+    with bounded_http():  # a registry answering 5xx to the model's lookup: seconds, not minutes of retries
+        model = mlflow.pyfunc.load_model(uri)
     inner = model.unwrap_python_model()
     if not isinstance(inner, PolicyModel):
         raise ValueError(f"{uri} is not an lfdt policy model (logged by lfdt.policy_models)")

@@ -30,7 +30,8 @@ def run() -> None:
     args = stage.parser(__doc__, {"out": "the file that says the checks passed"}).parse_args()
     check_runnable(stage.params(args.params))
     uri = mlflow_runs.tracking_uri()
-    mlflow_runs.check_tracking_uri(uri)
+    mlflow_runs.check_tracking_uri(uri, thorough=True)  # a store cut short answers no query
+    mlflow_runs.experiment_name()  # LFDT_MLFLOW_EXPERIMENT: one the store can keep
     write_atomic(args.out, lambda tmp: tmp.write_text(PASSED))
     print(f"preflight: {args.params} valid; tracking store {redact(uri)} usable")
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from lfdt import mlflow_runs, reach
+from lfdt import inputs, mlflow_runs, reach
 from lfdt.errors import StageError
 from lfdt.files import temp_path
 from lfdt.sweep import runcache
@@ -255,13 +255,22 @@ def check_services(address: str | None, remote: Remote, timeout: float = reach.T
     """Before any work: the Ray cluster's head, the tracking server or database (``MLFLOW_TRACKING_URI``) and the
     remote's S3 endpoint each accept a connection within ``timeout`` seconds, or :class:`lfdt.reach.Unreachable`
     names the one that does not and its address (Ray, MLflow and boto would otherwise retry for minutes, Ray only
-    after the shared stages have run)."""
+    after the shared stages have run). The Ray address must answer as gRPC does, and the tracking store as
+    :func:`lfdt.mlflow_runs.check_tracking_uri` wants (a server not answering 5xx); ``LFDT_MLFLOW_EXPERIMENT`` must
+    be a name the store can keep (:class:`lfdt.errors.InputError` otherwise)."""
     if address not in RAY_LOCAL:
-        reach.check(address, "the Ray cluster (--address or RAY_ADDRESS)", default_port=RAY_HEAD_PORT,
-                    timeout=timeout)
+        # Ray's head (GCS) and its client server both speak gRPC; with TLS on (RAY_USE_TLS) the plain-text
+        # handshake cannot tell, so a connection is all that is checked
+        tls = os.environ.get("RAY_USE_TLS", "0").strip().lower() in ("1", "true", "yes")
+        inputs.tcp_service(address, "the Ray cluster (--address or RAY_ADDRESS)", "tcp" if tls else "grpc", timeout,
+                           default_port=RAY_HEAD_PORT,
+                           hint=f"the address of a Ray head (`ray start --head` prints it; port {RAY_HEAD_PORT}, or "
+                                f"ray://host:10001 for Ray's client)")
     uri = mlflow_runs.tracking_uri()
     if uri.split(":", 1)[0].split("+")[0] in ("http", "https", "postgresql", "postgres", "mysql", "mssql"):
         reach.check(uri, "the MLflow tracking store (MLFLOW_TRACKING_URI)", timeout=timeout)
+    mlflow_runs.check_tracking_uri(uri, timeout)  # answers, and not with 5xx (it accepting a connection is not all)
+    mlflow_runs.experiment_name()  # forwarded to every chain's stages: one the store can keep
     if remote.endpoint_url:
         reach.check(remote.endpoint_url, f"the S3 endpoint of DVC remote {remote.name!r} (--endpoint-url)",
                     timeout=timeout)
