@@ -267,10 +267,11 @@ with a SETTINGS frame of its own (a 9-byte frame header of type 4 on stream 0)."
 
 
 def tcp_service(address: str, what: str, protocol: str, timeout_s: float, *, default_port: int | None = None,
-                hint: str = "", error: type[InputError] = InputError) -> None:
-    """Check that ``address`` (``host:port`` or a URL) accepts a connection (:func:`lfdt.reach.check`) and speaks
-    ``protocol`` there, within ``timeout_s`` seconds: ``grpc`` (HTTP/2: Ray's head and its client server) or
-    ``tcp`` (a connection is enough). Another service on the port (a web server, a database, a program that says
+                reply_s: float = 3.0, hint: str = "", error: type[InputError] = InputError) -> None:
+    """Check that ``address`` (``host:port`` or a URL) accepts a connection within ``timeout_s`` seconds
+    (:func:`lfdt.reach.check`) and speaks ``protocol`` there, answering within ``reply_s`` seconds once connected (a
+    server answers a handshake in a round trip): ``grpc`` (HTTP/2: Ray's head and its client server) or ``tcp`` (a
+    connection is enough). Another service on the port (a web server, a database, a program that says
     nothing) would leave its client waiting for minutes; it raises ``error`` naming ``what``, the address and what
     came back, then ``hint``."""
     import socket
@@ -287,6 +288,7 @@ def tcp_service(address: str, what: str, protocol: str, timeout_s: float, *, def
     expected = f"expected a gRPC server (HTTP/2){f'; {hint}' if hint else ''}"
     try:
         with socket.create_connection((host, port), timeout=timeout_s) as sock:
+            sock.settimeout(min(reply_s, timeout_s))
             sock.sendall(GRPC_PREFACE)
             reply = b""
             while len(reply) < 9:
@@ -295,7 +297,7 @@ def tcp_service(address: str, what: str, protocol: str, timeout_s: float, *, def
                     break
                 reply += chunk
     except TimeoutError:
-        raise error(f"{what} at {at} accepts a connection but says nothing within {timeout_s:g} s; "
+        raise error(f"{what} at {at} accepts a connection but says nothing within {min(reply_s, timeout_s):g} s; "
                     f"{expected}") from None
     except OSError as err:
         raise error(f"{what} at {at} accepts a connection, then {(err.strerror or type(err).__name__).lower()}; "

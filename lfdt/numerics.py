@@ -42,7 +42,8 @@ from lfdt.errors import InputError
 from lfdt.inputs import env_choice
 
 SWITCH = "LFDT_NUMERICS"
-"""Environment variable: ``pinned`` (default) or ``native`` (each library picks its own kernels)."""
+"""Environment variable: ``pinned`` (default) or ``native`` (each library picks its own kernels); another value ends
+the importing program at once with one line ``error: ...`` and exit code 2."""
 
 MODES = ("pinned", "native")
 

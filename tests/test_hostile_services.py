@@ -295,7 +295,7 @@ CASES = [
                                           "MLFLOW_REGISTRY_URI": "http://{refused}"}, [],
      ["MLFLOW_REGISTRY_URI=http://{refused} does not answer"]),
     ("ray-silent", sweep, {}, ["--address", "{silent}"],
-     ["--address or RAY_ADDRESS", "{silent}", "says nothing", "expected a gRPC server"]),
+     ["--address or RAY_ADDRESS", "{silent}", "says nothing within 3 s", "expected a gRPC server"]),
     ("ray-garbage", sweep, {}, ["--address", "{garbage}"],
      ["--address or RAY_ADDRESS", "{garbage}", "+OK welcome", "expected a gRPC server"]),
     ("ray-is-http", sweep, {"RAY_ADDRESS": "ray://{http503}"}, [],
