@@ -5,6 +5,7 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 from pathlib import Path
 
 from lfdt import parallel, stage, twin
+from lfdt.errors import InputError
 from lfdt.rig import deploy_log
 from lfdt.tasks import registry
 from lfdt.twin import evaluate as twin_evaluate
@@ -12,14 +13,16 @@ from lfdt.twin.common import SeedJob
 
 
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
-    """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots (of the policies of ``seed``)."""
+    """Trial outcomes logged by `python -m lfdt.robot deploy` on the robots (of the policies of ``seed``). A log that
+    is missing, empty or not a deploy log (a folder, bytes that are not UTF-8, a bad row) is an InputError naming it
+    (:class:`~lfdt.rig.deploy_log.DeployLogError` is one), which ends the stage with one line and exit 2."""
     rows = []
     for method in twin.TWIN_METHODS:
         path = Path(real_dir) / task / f"deploy_{method}.csv"
         trials = deploy_log.read_trials(path)
         if not trials:
-            raise FileNotFoundError(f"backend 'real': no deployment log {path} (or it holds no trial); run "
-                                    f"`python -m lfdt.robot deploy --task {task} --method {method} ...` on the robots")
+            raise InputError(f"backend 'real': no deployment log {path} (or it holds no trial); run "
+                             f"`python -m lfdt.robot deploy --task {task} --method {method} ...` on the robots")
         rows += [{"task": task, "method": method, "seed": seed, "trial": t, "success": ok} for t, ok in trials]
     return rows
 

@@ -19,6 +19,9 @@ APPENDABLE = [
     ("lf-no-final-newline", b"trial,success\n0,False\n1,False", [(0, False), (1, False), (2, True)]),
     ("crlf-no-final-newline", b"trial,success\r\n0,False\r\n1,False", [(0, False), (1, False), (2, True)]),
     ("blank-line-at-end", b"trial,success\n0,False\n\n", [(0, False), (1, True)]),
+    ("cr-only", b"trial,success\r0,False\r", [(0, False), (1, True)]),  # old Mac tools
+    ("cr-only-no-final-newline", b"trial,success\r0,False", [(0, False), (1, True)]),
+    ("crlf-cut-after-cr", b"trial,success\r\n0,False\r", [(0, False), (1, True)]),  # a crash between CR and LF
 ]
 
 
@@ -32,7 +35,8 @@ def test_a_hand_saved_log_takes_the_next_trial_on_a_line_of_its_own(tmp_path, be
     if before:
         assert log.read_bytes().startswith(before), "a byte of the earlier rows changed"
     # the file's own line ending; CRLF (csv's) for a new file or one with no complete line yet
-    ending = b"\n" if before and b"\n" in before and b"\r\n" not in before else b"\r\n"
+    ending = (b"\n" if before and b"\n" in before and b"\r\n" not in before
+              else b"\r" if before and b"\r" in before and b"\n" not in before else b"\r\n")
     assert log.read_bytes().endswith(b"True" + ending), "the new row does not end with the file's own line ending"
 
 

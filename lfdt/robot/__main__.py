@@ -2,6 +2,10 @@
 
 import sys
 
-from lfdt.robot.cli import main
+try:
+    from lfdt.robot.cli import main
+except KeyboardInterrupt:  # Ctrl-C while the modules load: the same one line as later on
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)  # cli.EXIT_INTERRUPTED, which did not load
 
 sys.exit(main())

@@ -63,16 +63,66 @@ class CameraCalibration:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> CameraCalibration:
-        """Inverse of :meth:`to_dict`."""
-        version = int(data.get("format_version", FORMAT_VERSION))
+        """Inverse of :meth:`to_dict`. A missing key raises KeyError; a value of the wrong type, shape or range
+        (a quoted number, a 2x2 matrix, fx <= 0, NaN) raises TypeError or ValueError naming the key."""
+        if not isinstance(data, dict):
+            raise TypeError(f"a calibration is a JSON object, not a {type(data).__name__}")
+        version = data.get("format_version", FORMAT_VERSION)
+        if not _is_int(version):
+            raise TypeError(f"format_version: {version!r} is not an integer")
         if version > FORMAT_VERSION:
             raise ValueError(f"calibration format {version} is newer than this code ({FORMAT_VERSION})")
-        k = np.asarray(data["camera_matrix"], dtype=np.float64).reshape(3, 3)
+        k = _numbers(data["camera_matrix"], "camera_matrix").reshape(-1)
+        if k.size != 9:
+            raise ValueError(f"camera_matrix: {k.size} numbers, not 3x3")
+        k = k.reshape(3, 3)
+        if not (k[0, 0] > 0 and k[1, 1] > 0):
+            raise ValueError("camera_matrix: fx and fy (the diagonal's first two numbers) must be > 0")
+        size = data["image_size"]
+        if not (isinstance(size, list) and len(size) == 2 and all(_is_int(v) and v > 0 for v in size)):
+            raise ValueError(f"image_size: {size!r} is not [width, height] in pixels (two positive integers)")
         rms = data.get("rms_px")
-        return cls(camera_matrix=k, dist_coeffs=np.asarray(data.get("dist_coeffs", []), dtype=np.float64).reshape(-1),
-                   image_size=(int(data["image_size"][0]), int(data["image_size"][1])),
-                   rms_px=float("nan") if rms is None else float(rms), n_views=int(data.get("n_views", 0)),
-                   method=str(data.get("method", "manual")))
+        if rms is not None and not _is_number(rms):
+            raise TypeError(f"rms_px: {rms!r} is not a number or null")
+        n_views = data.get("n_views", 0)
+        if not _is_int(n_views):
+            raise TypeError(f"n_views: {n_views!r} is not an integer")
+        method = data.get("method", "manual")
+        if not isinstance(method, str):
+            raise TypeError(f"method: {method!r} is not a string")
+        return cls(camera_matrix=k, dist_coeffs=_numbers(data.get("dist_coeffs", []), "dist_coeffs").reshape(-1),
+                   image_size=(int(size[0]), int(size[1])), rms_px=float("nan") if rms is None else float(rms),
+                   n_views=int(n_views), method=method)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _numbers(value: Any, key: str) -> np.ndarray:
+    """A (nested) JSON list of finite numbers as a float array; a string, a boolean or NaN is refused (numpy would
+    turn "1.5" and true into numbers)."""
+    def flat(v: Any) -> list:
+        if isinstance(v, list):
+            return [x for item in v for x in flat(item)]
+        if not _is_number(v):
+            raise TypeError(f"{key}: {v!r} is not a number")
+        return [v]
+
+    if not isinstance(value, list):
+        raise TypeError(f"{key}: {value!r} is not a list of numbers")
+    numbers = flat(value)
+    try:
+        out = np.asarray(value, dtype=np.float64)
+    except ValueError:
+        raise ValueError(f"{key}: rows of different lengths") from None
+    if not np.all(np.isfinite(out)) or out.size != len(numbers):
+        raise ValueError(f"{key}: not a table of finite numbers")
+    return out
 
 
 def calibration_from_intrinsics(camera_matrix: np.ndarray | Sequence[float], image_size: tuple[int, int],

@@ -2,7 +2,10 @@
 
 Each subcommand has an ``add_<name>_parser`` function that registers it and a ``run_<name>(args) -> int`` function
 bound with ``set_defaults(func=...)``. Exit codes: 0 done; 2 bad arguments (argparse), a refused command
-(SafetyError) or an arm that does not answer (ArmNotResponding); anything else propagates with a traceback.
+(SafetyError), an arm that does not answer (ArmNotResponding), or a file or folder given on the command line or in
+the rig config that cannot be used (checked by :mod:`lfdt.inputs` before anything moves or is written; a full disk
+or a refused write later on ends the same way, naming the file); 130 Ctrl-C. Each ends with one line on stderr;
+anything else propagates with a traceback.
 
 Try it without hardware: ``python -m lfdt.robot.fake_mycobot --pty`` prints a device path to pass as ``--port``.
 
@@ -21,7 +24,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from lfdt import twin
+from lfdt import inputs, twin
+from lfdt.errors import StageError
 from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot.arm import (
     ArmNotResponding,
@@ -186,6 +190,11 @@ def run_calibrate(args: argparse.Namespace) -> int:
         print("error: --charuco needs --marker (marker edge in metres)", file=sys.stderr)
         return EXIT_FAILED
     source = _camera_source(args.camera)
+    if isinstance(source, int):
+        inputs.camera_device(source, "--camera")
+    else:
+        inputs.readable_file(source, "--camera", "a video file, or a camera index such as 0")
+    inputs.writable_file(args.out, "--out", "a path for the calibration JSON")
     try:
         cap = open_capture(source)
     except (FileNotFoundError, RuntimeError) as e:
@@ -237,6 +246,7 @@ def run_write_rig_config(args: argparse.Namespace) -> int:
     """Write the example; exit 2 when the file exists and --force is not given."""
     from lfdt.robot.rig_config import write_rig_config
 
+    inputs.writable_file(args.out, "--out", "a path for the rig JSON")
     try:
         path = write_rig_config(args.out, args.task, overwrite=args.force)
     except FileExistsError as e:
@@ -264,7 +274,7 @@ def add_rig_arguments(parser: argparse.ArgumentParser, task_required: bool = Fal
 
 def _rig_task(args: argparse.Namespace):
     """The task and the rig config (None with --sim and no --rig); exit-2 errors as RigConfigError."""
-    from lfdt.robot.rig_config import RigConfigError, load_rig_config
+    from lfdt.robot.rig_config import RigConfigError, check_camera, load_rig_config
 
     config = None
     if args.rig is not None:
@@ -276,6 +286,8 @@ def _rig_task(args: argparse.Namespace):
     task = args.task or (config.task if config is not None else None)
     if task is None:
         raise RigConfigError("--sim without --rig needs --task")
+    if config is not None and not args.sim:
+        check_camera(config, f"--rig {args.rig}")  # the calibration and the camera, before any arm moves
     return task, config
 
 
@@ -342,10 +354,10 @@ def _record_loop(rig, rec, out: Path, episodes: int, unit: str, run_episode) -> 
         print(f"interrupted: arms stopped; {_episodes_in(out)} finished episodes in {out}, the episode in "
               f"progress was dropped", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except BaseException:
+    except BaseException as e:
         rec.abort()
-        print(f"stopped: {_episodes_in(out)} finished episodes in {out}, the episode in progress was dropped",
-              file=sys.stderr)
+        # main prints the error and this note on one line
+        e.add_note(f"stopped: {_episodes_in(out)} finished episodes in {out}, the episode in progress was dropped")
         raise
     return 0
 
@@ -386,6 +398,7 @@ def run_record_random(args: argparse.Namespace) -> int:
     from lfdt.twin.common import twin_schema
 
     task, config = _rig_task(args)
+    inputs.output_folder(args.out, "--out", "a folder for the recording (one Parquet file per episode)")
     rig = _make_rig(args, task, config, args.domain, args.human, args.seed)
     meta = _metadata(args, config, seed=args.seed, steps=args.steps, reach=args.reach, hold_max=args.hold_max)
     rec = EpisodeRecorder(args.out, twin_schema(task, args.domain, "random", meta), rig.control_dt)
@@ -437,6 +450,7 @@ def run_record_demos(args: argparse.Namespace) -> int:
     from lfdt.twin.common import twin_schema
 
     task, config = _rig_task(args)
+    inputs.output_folder(args.out, "--out", "a folder for the recording (one Parquet file per episode)")
     rig = _make_rig(args, task, config, args.pairing, "scripted", args.seed, max_steps=args.steps)
     robot = layout.robot_arm(args.pairing)
     slot = rig.slots.index(robot)
@@ -505,19 +519,18 @@ def add_deploy_parser(subparsers) -> None:
 
 
 def run_deploy(args: argparse.Namespace) -> int:
-    """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C."""
+    """Run ``--trials`` trials and append their outcomes; returns 0, or 130 on Ctrl-C. Before each trial the log is
+    checked to take its outcome (:func:`lfdt.rig.deploy_log.check_appendable`): a trial whose outcome could not be
+    kept is not run."""
     from lfdt import policy_models
     from lfdt.evaluation import evaluation_seeds
+    from lfdt.nets import ModelFileError
     from lfdt.rig import deploy_log
     from lfdt.rig.base import running
     from lfdt.twin.evaluate import load_policy
 
     task, config = _rig_task(args)
-    try:
-        done = len(deploy_log.read_trials(args.log))
-    except deploy_log.DeployLogError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_FAILED
+    done = deploy_log.check_appendable(args.log, "--log")
     if policy_models.is_uri(args.models):
         from mlflow.exceptions import MlflowException
 
@@ -532,7 +545,11 @@ def run_deploy(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_FAILED
     else:
-        policy = load_policy(task, args.method, args.models)
+        try:
+            policy = load_policy(task, args.method, args.models)
+        except ModelFileError as e:  # a missing or damaged sidecar or weights file
+            print(f"error: --models {args.models}: {e}", file=sys.stderr)
+            return EXIT_FAILED
     rig = _make_rig(args, task, config, "Y", "scripted", 0, max_steps=args.steps)
     seeds = evaluation_seeds(done + args.trials)  # the twin evaluation's start states, trial by trial
     successes = 0
@@ -540,6 +557,11 @@ def run_deploy(args: argparse.Namespace) -> int:
     try:
         with running(rig), bar:
             for trial in range(done, done + args.trials):
+                if trial > done:  # the first was checked above; the disk may have filled or the file changed since
+                    logged = deploy_log.check_appendable(args.log, "--log")
+                    if logged != trial:
+                        raise deploy_log.DeployLogError(f"--log {args.log}: holds {logged} trials where {trial} "
+                                                        "were expected (another deploy writing to it?)")
                 obs = rig.reset(seed=seeds[trial])
                 _wait_for_operator(rig, f"trial {trial}: robots at their start poses, set the scene", False)
                 for _ in range(args.steps):
@@ -552,7 +574,14 @@ def run_deploy(args: argparse.Namespace) -> int:
                 ok = rig.outcome()
                 if ok is None:
                     ok = _ask_yes_no(f"trial {trial}: did the task succeed?")
-                deploy_log.append_trial(args.log, trial, ok)
+                try:
+                    deploy_log.append_trial(args.log, trial, ok)
+                except (OSError, deploy_log.DeployLogError) as e:
+                    # checked just before the trial, yet the write failed: the outcome goes to the screen instead
+                    reason = (e.strerror or str(e)) if isinstance(e, OSError) else str(e)
+                    raise deploy_log.DeployLogError(
+                        f"--log {args.log}: the outcome of trial {trial} ({ok}) could not be appended ({reason}); "
+                        f"add the row '{trial},{ok}' yourself once the log can take it") from None
                 successes += ok
                 bar.update(1)
     except KeyboardInterrupt:
@@ -579,23 +608,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments)."""
-    from lfdt.rig.recording import RecordingMismatch
-    from lfdt.robot.rig_config import RigConfigError  # light: pydantic and numpy; the heavy modules load per command
+def _one_line(err: BaseException) -> str:
+    """An error's message and its notes (what was kept, what to do) on one line."""
+    text = " ".join(str(err).split("\n"))
+    return "; ".join([text, *getattr(err, "__notes__", [])])
 
-    args = build_parser().parse_args(argv)
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one subcommand; returns the exit code (argparse exits 2 itself on bad arguments). Every ending but a bug
+    is one line on stderr: ``refused: ...``, ``error: ...`` (exit 2) or ``interrupted`` (exit 130)."""
     try:
+        from lfdt.rig.recording import RecordingMismatch
+        from lfdt.robot.rig_config import RigConfigError  # light: pydantic and numpy; the heavy ones load per command
+
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except SafetyError as e:
         print(f"refused: {e}; that command was not sent", file=sys.stderr)
         return EXIT_FAILED
-    except (ArmNotResponding, TrackingLost, RigConfigError, RecordingMismatch) as e:
-        print(f"error: {e}", file=sys.stderr)
+    except (ArmNotResponding, TrackingLost, RigConfigError, RecordingMismatch, StageError) as e:
+        # StageError: a user-given file or folder that cannot be used (lfdt.inputs), a damaged model file
+        print(f"error: {_one_line(e)}", file=sys.stderr)
         return EXIT_FAILED
     except EOFError:  # input() on a closed stdin: nobody to answer the operator's questions
         print("error: stdin closed while waiting for the operator (robots: run interactively, or --yes where "
               "offered)", file=sys.stderr)
+        return EXIT_FAILED
+    except OSError as e:  # a full disk, a folder where a file belongs, no permission: the OS names the path
+        print(f"error: {'; '.join([inputs.os_error_message(e), *getattr(e, '__notes__', [])])}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -68,9 +68,14 @@ class RealRig(Rig):
 
         cam = self.config.camera
         sizes = {} if cam.table_tag_size_m is None else {cam.table_tag_id: cam.table_tag_size_m}
-        tracker = Tracker(cam.source, cam.calibration, table_tag_id=cam.table_tag_id,
-                          table_tag_in_base=cam.table_tag_pose.matrix(1e-3), hand_tag_id=cam.hand_tag_id,
-                          object_tag_id=cam.object_tag_id, tag_size_m=cam.tag_size_m, tag_sizes_m=sizes)
+        try:
+            tracker = Tracker(cam.source, cam.calibration, table_tag_id=cam.table_tag_id,
+                              table_tag_in_base=cam.table_tag_pose.matrix(1e-3), hand_tag_id=cam.hand_tag_id,
+                              object_tag_id=cam.object_tag_id, tag_size_m=cam.tag_size_m, tag_sizes_m=sizes)
+        except (OSError, RuntimeError, ValueError, KeyError, TypeError) as e:
+            # a camera that exists but cannot be opened (busy, unplugged since the check), a file OpenCV cannot read
+            raise RigConfigError(f"camera.source {cam.source} (calibration {cam.calibration}): cannot open the "
+                                 f"camera: {e}") from None
         # a live camera's driver queues frames; a short queue keeps observations fresh
         tracker.capture.set(cv2.CAP_PROP_BUFFERSIZE, 1)
         return tracker

@@ -12,13 +12,15 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from lfdt import inputs
+from lfdt.errors import InputError
 from lfdt.files import temp_path
 from lfdt.robot import kinematics
 from lfdt.robot.arm import SafetyLimits
 from lfdt.tasks import registry
 
 
-class RigConfigError(ValueError):
+class RigConfigError(InputError, ValueError):
     """A rig configuration file that cannot be used; the message names the file and the key."""
 
 
@@ -230,12 +232,13 @@ def parse_rig_config(text: str, where: str = "rig config") -> RigConfig:
 
 
 def load_rig_config(path: str | Path) -> RigConfig:
-    """Read and validate a rig JSON file; relative camera paths are resolved from the file's folder."""
+    """Read and validate a rig JSON file; relative camera paths are resolved from the file's folder. The camera's
+    own files are checked by :func:`check_camera` (the robots need them, a dry run on the twin does not)."""
     path = Path(path)
     try:
-        text = path.read_text()
-    except OSError as e:
-        raise RigConfigError(f"cannot read rig config {path}: {e.strerror or e}") from None
+        text = inputs.read_text(path, "rig config", "a rig JSON (python -m lfdt.robot write-rig-config)")
+    except InputError as e:
+        raise RigConfigError(f"cannot read {e}") from None
     cfg = parse_rig_config(text, str(path))
     base = path.resolve().parent
     cam = cfg.camera
@@ -243,6 +246,22 @@ def load_rig_config(path: str | Path) -> RigConfig:
     if isinstance(cam.source, str):
         update["source"] = str(base / cam.source)
     return cfg.model_copy(update={"camera": cam.model_copy(update=update)})
+
+
+def check_camera(cfg: RigConfig, where: str | Path) -> None:
+    """Before anything moves: the calibration file is a camera calibration (not missing, empty, garbage or JSON of
+    another shape) and the camera source exists (a video file, or on Linux the device of a camera index).
+    RigConfigError names the rig config ``where``, the key and the file."""
+    from lfdt.robot.calibration import CameraCalibration  # OpenCV: only for the robots
+
+    cam = cfg.camera
+    inputs.json_object(cam.calibration, f"{where}: camera.calibration", "a camera calibration JSON (python -m "
+                       "lfdt.robot calibrate --out ...)", CameraCalibration.from_dict, error=RigConfigError)
+    if isinstance(cam.source, str):
+        inputs.readable_file(cam.source, f"{where}: camera.source", "a video file, or a camera index such as 0",
+                             error=RigConfigError)
+    else:
+        inputs.camera_device(cam.source, f"{where}: camera.source", error=RigConfigError)
 
 
 def example_rig_config(task: str = "block_push") -> dict:
