@@ -214,6 +214,8 @@ CASES = [
          "block_push"), ("--out {tmp}/rec: is a file, not a folder",)),
     Case("record-demos-out-a-file", lambda tmp: (tmp / "rec").write_text("x") and record(
         tmp, "--sim", "--task", "block_push", command="record-demos"), ("--out {tmp}/rec: is a file, not a folder",)),
+    Case("record-out-meta-garbage", lambda tmp: (tmp / "rec").mkdir() or (tmp / "rec" / "_meta.json").write_bytes(
+        b"\x00\xff") and record(tmp, "--sim", "--task", "block_push"), ("{tmp}/rec/_meta.json: line 1",)),
     Case("record-out-disk-full", lambda tmp: record(tmp, "--sim", "--task", "block_push"),
          ("--out {tmp}/rec: the disk holding it is full",), patch=disk_full),
     Case("calibrate-out-a-folder", lambda tmp: (tmp / "v.avi").write_text("") or (tmp / "out").mkdir() or [

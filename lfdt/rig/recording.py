@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from lfdt import data
+from lfdt import data, inputs
 from lfdt.files import temp_path
 
 EPISODE_GLOB = "episode_*.parquet"
@@ -39,7 +39,9 @@ class EpisodeRecorder:
         meta = self.dir / "_meta.json"
         mine = data.read_schema_metadata(schema)
         if meta.exists():
-            theirs = json.loads(meta.read_text())
+            # written by this class, but a folder given by the user may hold anything under that name
+            theirs = inputs.json_object(meta, "recording folder's", "the metadata a recording started with (or "
+                                        "choose another --out)")
             for key in IDENTITY:
                 if theirs.get(key) != mine.get(key):
                     raise RecordingMismatch(f"{self.dir} holds a recording of {key} {theirs.get(key)!r}, not "
