@@ -99,9 +99,14 @@ def run_time(root: Path) -> str:
     lines = ["| stage | runs | minutes |", "| --- | --- | --- |"]
     for r in rows:
         lines.append(f"| {r['stage']} | {r['runs']} | {float(r['total_s']) / 60:.1f} |")
-    lines += ["", f"A full `dvc repro` from a clean clone took **{doc['minutes']:.1f} min** on {doc['cpu_model']} "
-              f"({doc['cores']} cores, {doc['date']}, commit {doc['commit'][:7]}); the stages' own processes sum to "
-              f"{sum(float(r['total_s']) for r in rows) / 60:.1f} min, the rest is DVC's."]
+    stages_min = sum(float(r['total_s']) for r in rows) / 60
+    where = f"{doc['cpu_model']} ({doc['cores']} cores, {doc['date']}, commit {doc['commit'][:7]})"
+    if doc.get("minutes") is None:  # a run that was not timed in one piece says so, never an estimate
+        lines += ["", f"The committed run on {where}: {doc['how']}. Its wall time was not measured in one piece; "
+                      f"the stages' own processes sum to **{stages_min:.1f} min**."]
+    else:
+        lines += ["", f"A full `dvc repro` from a clean clone took **{doc['minutes']:.1f} min** on {where}; the "
+                      f"stages' own processes sum to {stages_min:.1f} min, the rest is DVC's."]
     return "\n".join(lines)
 
 
@@ -109,6 +114,10 @@ def run_time_line(root: Path) -> str:
     """One sentence: how long the committed run took, where (reports/run_time.json)."""
     doc = _read_json(root / "reports" / "run_time.json")
     setup = "" if doc.get("setup_minutes") is None else f", after {doc['setup_minutes']:.1f} min of `make setup`"
+    if doc.get("minutes") is None:
+        return (f"The committed results were computed on {doc['cpu_model']} with {doc['cores']} cores, {doc['date']} "
+                f"({doc['how']}); that run's wall time was not measured in one piece (per stage: "
+                "[docs/results.md](docs/results.md#run-time)).")
     return (f"The committed results took **{doc['minutes']:.0f} min** of `dvc repro` ({doc['how']}{setup}) on "
             f"{doc['cpu_model']} with {doc['cores']} cores, {doc['date']}.")
 
