@@ -61,7 +61,7 @@ def test_demos_fail_loudly_when_expert_cannot_succeed(tmp_path):
     model, _ = experts.train_expert("HR2", EnvConfig(), TINY.model_copy(update={"total_timesteps": 200}),
                                     DemosConfig(), tmp_path / "ckpt")
     with pytest.raises(RuntimeError, match="demos.max_attempts = 3"):
-        experts.collect_demos(model, "HR2", EnvConfig(), DemosConfig(per_pairing=5, max_attempts=3))
+        experts.collect_demos(model, "HR2", EnvConfig(), DemosConfig(per_pairing=3, max_attempts=3))
 
 
 def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
