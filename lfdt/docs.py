@@ -73,20 +73,26 @@ def cross_cpu(root: Path) -> str:
     fp = _read_json(root / "reports" / "fingerprint.json")
     lines = ["| CPU (as /proc/cpuinfo or QEMU names it) | vector ISA | numerics | same bits as the committed "
              "fingerprint |", "| --- | --- | --- | --- |"]
-    for r in doc["runs"]:
-        if r["emulated_model"]:
-            cpu, isa = f"QEMU `-cpu {r['emulated_model']}` on {doc['host_cpu_model']}", "AVX2 (emulated)"
-        else:
-            cpu, isa = doc["host_cpu_model"], doc["host_cpu_isa"].upper().replace("AVX512", "AVX-512")
-        n_same = sum(r["matches_committed"].values())
-        verdict = f"yes, all {len(r['matches_committed'])} components compared" if r["all_match"] else \
-            f"no ({n_same}/{len(r['matches_committed'])} components)"
-        lines.append(f"| {cpu} | {isa} | {r['numerics']} | {verdict} |")
+    for host in [doc, *doc.get("earlier_hosts", [])]:
+        when = "" if host is doc else f", {host['date']}"
+        for r in host["runs"]:
+            if r["emulated_model"]:
+                cpu, isa = f"QEMU `-cpu {r['emulated_model']}` on {host['host_cpu_model']}{when}", "AVX2 (emulated)"
+            else:
+                cpu = host["host_cpu_model"] + when
+                isa = host["host_cpu_isa"].upper().replace("AVX512", "AVX-512")
+            n_same = sum(r["matches_committed"].values())
+            verdict = f"yes, all {len(r['matches_committed'])} components compared" if r["all_match"] else \
+                f"no ({n_same}/{len(r['matches_committed'])} components)"
+            lines.append(f"| {cpu} | {isa} | {r['numerics']} | {verdict} |")
     libs = ", ".join(f"{k} {v}" for k, v in sorted(fp["versions"].items()))
     compared = sorted({k for r in doc["runs"] for k in r["matches_committed"]})
     later = sorted(set(fp["components"]) - set(compared))
     lines += ["", f"Measured {doc['date']} with `python tools/cross_cpu.py` ({doc['qemu']}); components "
               f"{', '.join(compared)}; libraries {libs}."
+              + "".join(f" The rows dated {e['date']} ran on {e['host_cpu_model']} against the fingerprint of then "
+                        f"({len(e['committed'])} components: {', '.join(sorted(e['committed']))})."
+                        for e in doc.get("earlier_hosts", []))
               + (f" Added to the fingerprint since, not yet run on these CPUs: {', '.join(later)} (`make cross-cpu`)."
                  if later else "")]
     return "\n".join(lines)

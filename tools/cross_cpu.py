@@ -39,6 +39,18 @@ def run_fingerprint(prefix: list[str], env: dict[str, str], timeout: int) -> dic
         return json.loads(out.read_text())
 
 
+def earlier_hosts(path: Path, host: str) -> list[dict]:
+    """The last report's runs on other host CPUs (each host's latest), kept so that a run on this machine does not
+    erase what another CPU reproduced: each with its date and the fingerprint it was compared with."""
+    if not path.exists():
+        return []
+    old = json.loads(path.read_text())
+    keep = {e["host_cpu_model"]: e for e in old.get("earlier_hosts", [])}
+    keep[old["host_cpu_model"]] = {k: old[k] for k in ("date", "host_cpu_model", "host_cpu_isa", "qemu", "committed",
+                                                       "runs")}
+    return [e for h, e in sorted(keep.items()) if h != host]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", nargs="*", default=["Haswell", "EPYC"], help="QEMU CPU models (qemu-x86_64 -cpu help)")
@@ -66,7 +78,7 @@ def main() -> None:
         if qemu else None
     report = {"date": datetime.date.today().isoformat(), "host_cpu_model": numerics.cpu_model(),
               "host_cpu_isa": numerics.isa(), "qemu": qemu_version, "committed": committed["components"],
-              "runs": runs}
+              "runs": runs, "earlier_hosts": earlier_hosts(args.out, numerics.cpu_model())}
     args.out.write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {args.out}", file=sys.stderr)
 

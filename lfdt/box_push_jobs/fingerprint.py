@@ -13,7 +13,12 @@ produced (SHA-256, first 16 hex digits):
 * ``statistics``: NumPy and SciPy statistics of the reports (normalisers, intervals over seeds and start states);
 * ``pushes``: random-motion episodes that push the box (``random.push_fraction``), F's error on two-arm pushes in the
   box's frame (``reports/dynamics.json``'s ``pushes/``), and a translator trained with the sideways term
-  (``translator.lambda_side``: weights and curves).
+  (``translator.lambda_side``: weights and curves);
+* ``diagnostics``: what the translator stage reports beside its weights, on that translator and the pushes taken
+  as demonstrations: :func:`~lfdt.translation.apply.translator_diagnostics` (L_dyn split, D's accuracies, F^-1's
+  labels, the kinematics' residuals), the translated demonstrations with their
+  :func:`~lfdt.translation.apply.translation_diagnostics`, and their open-loop replay in MuJoCo
+  (:func:`~lfdt.tasks.box_push.env.replay_check`): every value at full precision.
 
 ``python -m lfdt.box_push_jobs.fingerprint`` prints the hashes (``--out`` writes them as JSON); the ``fingerprint``
 stage writes ``reports/fingerprint.json``, and ``tests/test_fingerprint.py`` recomputes them and compares. Where the
@@ -39,7 +44,7 @@ import torch
 
 from lfdt import data, layout, numerics
 
-COMPONENTS = ("mujoco_step", "dynamics", "translator", "bc", "sac", "statistics", "pushes")
+COMPONENTS = ("mujoco_step", "dynamics", "translator", "bc", "sac", "statistics", "pushes", "diagnostics")
 """The components hashed, in the order they run."""
 
 
@@ -207,7 +212,39 @@ def _pushes(random_y_table, dyn) -> str:
                                    kinematics=box_push_kinematics(env_cfg))
     curves = np.array([[v for c in st["curve"] for v in c.values()] for st in stats])
     numbers = [tables[d].to_pandas().select_dtypes("number").to_numpy() for d in layout.DOMAINS]
-    return _hash(*numbers, np.array([probe["across"], probe["along"], probe["angle"]]), trs[0].state_dict(), curves)
+    return (_hash(*numbers, np.array([probe["across"], probe["along"], probe["angle"]]), trs[0].state_dict(), curves),
+            {"tables": tables, "translator": trs[0], "cfg": cfg, "y": y})
+
+
+def _diagnostics(pushes: dict, dyn) -> str:
+    from lfdt.box_push_jobs.translator import box_push_kinematics
+    from lfdt.config import EnvConfig
+    from lfdt.tasks.box_push import columns as box_columns
+    from lfdt.tasks.box_push.env import replay_check
+    from lfdt.translation.apply import translate_demos, translation_diagnostics, translator_diagnostics
+    from lfdt.translation.model import MeanTranslator
+    from lfdt.translation.transitions import load_x_transitions
+
+    env_cfg = EnvConfig()
+    tl = box_columns.BOX_PUSH
+    tr, cfg = pushes["translator"], pushes["cfg"]
+    with tempfile.TemporaryDirectory() as tmp, torch.no_grad():
+        paths, demos, randoms = {}, {}, {}
+        for p in layout.PAIRINGS:
+            table = pushes["tables"][p]
+            meta = {**data.read_schema_metadata(table.schema), "kind": "demos"}  # the pushes stand in for demos
+            paths[p] = data.write_table(table.replace_schema_metadata({data.META_KEY: json.dumps(meta).encode()}),
+                                        Path(tmp) / f"{p}.parquet")
+            demos[p] = load_x_transitions(paths[p], p, tl=tl, with_actions=True, kind="demos")
+            randoms[p] = load_x_transitions(paths[p], p, tl=tl, kind="demos")
+        episodes = {p: sorted(int(e) for e in np.unique(demos[p].episode)) for p in layout.PAIRINGS}
+        diag = translator_diagnostics(tr, dyn, cfg, demos, randoms, pushes["y"], tl=tl,
+                                      kinematics=box_push_kinematics(env_cfg), max_random=200, seed=4)
+        df = translate_demos(MeanTranslator([tr]), dyn, paths, episodes, cfg, env_cfg.timestep * env_cfg.frame_skip,
+                             tl)
+        diag.update(translation_diagnostics(df, paths, episodes, tl))
+        diag.update(replay_check(df, env_cfg))
+    return _hash(df.select_dtypes("number").to_numpy(), np.array([diag[k] for k in sorted(diag)], dtype=np.float64))
 
 
 def compute(only: list[str] | None = None, log: Callable[[str], None] | None = None) -> dict[str, str]:
@@ -226,18 +263,28 @@ def compute(only: list[str] | None = None, log: Callable[[str], None] | None = N
         out["mujoco_step"] = mj
         note("mujoco_step", t0)
     dyn = None
-    if want & {"dynamics", "translator", "pushes"}:
+    if want & {"dynamics", "translator", "pushes", "diagnostics"}:
         t0 = time.perf_counter()
         h, dyn = _dynamics(data["random_motion"])
         if "dynamics" in want:
             out["dynamics"] = h
             note("dynamics", t0)
     for name, fn in (("translator", lambda: _translator(data["random_motion"], dyn)), ("bc", _bc), ("sac", _sac),
-                     ("statistics", _statistics), ("pushes", lambda: _pushes(data["random_motion"], dyn))):
+                     ("statistics", _statistics)):
         if name in want:
             t0 = time.perf_counter()
             out[name] = fn()
             note(name, t0)
+    if want & {"pushes", "diagnostics"}:  # the diagnostics measure the pushes' translator
+        t0 = time.perf_counter()
+        h, pushes = _pushes(data["random_motion"], dyn)
+        if "pushes" in want:
+            out["pushes"] = h
+            note("pushes", t0)
+        if "diagnostics" in want:
+            t0 = time.perf_counter()
+            out["diagnostics"] = _diagnostics(pushes, dyn)
+            note("diagnostics", t0)
     return out
 
 
