@@ -12,6 +12,7 @@ import argparse
 import csv
 import json
 import re
+import statistics
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -152,7 +153,7 @@ def translator_diagnostics(root: Path) -> str:
 
 
 def benchmarks(root: Path) -> str:
-    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json)."""
+    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json, worker_start.json)."""
     res = root / "benchmarks" / "results"
     lines = ["| benchmark | ours | baseline | ratio | goal |", "| --- | --- | --- | --- | --- |"]
     st = _read_json(res / "stack_throughput.json")
@@ -166,8 +167,19 @@ def benchmarks(root: Path) -> str:
             r = pc[name]
             lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` (/s) | {r['per_s']['pinned']:.0f} | "
                          f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
+    ws = _read_json(res / "worker_start.json")
+    med = ws["median"]
+    lines.append(f"| a stage's two workers: spawn vs forkserver, whole stage process (s, wall; lower is better) | "
+                 f"{med['forkserver']['wall_s']:.1f} | {med['spawn']['wall_s']:.1f} | "
+                 f"**{ws['ratio_wall_spawn_over_forkserver']:.2f}** | |")
+    if ws.get("smoke_runs"):
+        sm = {m: statistics.median(ws["smoke"][m]["wall_s"]) for m in ("spawn", "forkserver")}
+        lines.append(f"| the smoke DAG's `dvc repro`: spawn vs forkserver (s, wall; lower is better) | "
+                     f"{sm['forkserver']:.0f} | {sm['spawn']:.0f} | "
+                     f"**{ws['smoke_ratio_wall_spawn_over_forkserver']:.2f}** | |")
     lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']}, "
-              f"{pc['date']}, medians of {pc['repeats']}."]
+              f"{pc['date']}, medians of {pc['repeats']}. Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
+              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's time / forkserver's."]
     return "\n".join(lines)
 
 

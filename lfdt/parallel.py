@@ -2,9 +2,14 @@
 
 DVC runs one stage at a time, so a matrix stage that trains several seeds is where the second core of a
 laptop-class CPU earns its keep: :func:`run_jobs` runs the seeds ``workers`` at a time, each in its own
-process (``spawn``: no state shared with the parent), and gathers their results in job order. A job that
-fails stops the stage with the job named; with ``workers=1`` the jobs run one after the other in this process
-(the serial baseline of ``benchmarks/parallel_speedup.py``).
+process, and gathers their results in job order. A job that fails stops the stage with the job named; with
+``workers=1`` the jobs run one after the other in this process (the serial baseline of
+``benchmarks/parallel_speedup.py``).
+
+The workers start by ``forkserver`` (:func:`start_method`): a fresh server process imports the stage's script and
+its modules once (torch, MLflow, the job's code), then each worker is a fork of it. Nothing is shared with the stage
+process, as with ``spawn``, but the workers do not each import torch and MLflow again: a small stage's start is where
+that shows (``benchmarks/worker_start.py``), and every result is the same bits either way.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from tqdm import tqdm
 
 from lfdt import lifeline
 from lfdt.errors import StageError
+from lfdt.inputs import env_choice
 
 
 class Progress(Protocol):
@@ -51,6 +57,17 @@ class _QueueProgress:
             self.q.put(self.pending)
             self.pending = 0
 
+
+START_METHOD_VAR = "LFDT_WORKER_START"
+"""Environment variable: how a matrix stage starts its workers, ``forkserver`` (default) or ``spawn`` (the
+benchmark's baseline); another value is a one-line error naming it."""
+
+
+def start_method() -> str:
+    """How :func:`run_jobs` starts its workers: :data:`START_METHOD_VAR`, else ``forkserver`` (``spawn`` where the
+    platform has no forkserver)."""
+    default = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+    return env_choice(START_METHOD_VAR, ("forkserver", "spawn"), default)
 
 _PROGRESS_QUEUE = None
 """In a worker: the queue its jobs' progress goes to (set by :func:`_init_worker`)."""
@@ -82,18 +99,19 @@ def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
 
 
 def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: int, total: int | None = None,
-             desc: str = "jobs", unit: str = "it") -> list[Any]:
+             desc: str = "jobs", unit: str = "it", method: str | None = None) -> list[Any]:
     """``fn(job, progress)`` for every job, ``workers`` processes at a time; results in job order.
 
     ``fn`` must be importable by name (a module-level function) and ``job`` picklable. ``total`` is the
-    progress bar's length (the sum of what the jobs report).
+    progress bar's length (the sum of what the jobs report); ``method`` how the workers start (``forkserver`` or
+    ``spawn``; None: :func:`start_method`).
     """
     bar = tqdm(total=total, desc=desc, unit=unit, unit_scale=True, mininterval=1.0, dynamic_ncols=True,
                file=sys.stderr)
     try:
         if workers <= 1 or len(jobs) <= 1:
             return [fn(job, bar) for job in jobs]
-        ctx = mp.get_context("spawn")
+        ctx = mp.get_context(method or start_method())
         q = ctx.Queue()
         done = threading.Event()
 

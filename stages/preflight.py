@@ -8,7 +8,7 @@ MLFLOW_TRACKING_URI alone is checked by each stage as it starts.
 The file it writes says only that the check passed, the same bytes whatever the params: a later stage depends on it
 for the order of the DAG, and is rerun for its own params, never for this file."""
 
-from lfdt import mlflow_runs, stage
+from lfdt import mlflow_runs, parallel, stage
 from lfdt.config import Params
 from lfdt.files import write_atomic
 from lfdt.reach import redact
@@ -32,6 +32,7 @@ def run() -> None:
     uri = mlflow_runs.tracking_uri()
     mlflow_runs.check_tracking_uri(uri, thorough=True)  # a store cut short answers no query
     mlflow_runs.experiment_name()  # LFDT_MLFLOW_EXPERIMENT: one the store can keep
+    parallel.start_method()  # LFDT_WORKER_START: how the matrix stages start their workers
     write_atomic(args.out, lambda tmp: tmp.write_text(PASSED))
     print(f"preflight: {args.params} valid; tracking store {redact(uri)} usable")
 

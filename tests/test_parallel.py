@@ -26,6 +26,19 @@ def fail_on_two(job: int, progress) -> int:
 def test_results_come_back_in_job_order():
     assert parallel.run_jobs(square, [3, 1, 2], workers=2, total=3) == [9, 1, 4]
     assert parallel.run_jobs(square, [3, 1, 2], workers=1, total=3) == [9, 1, 4]
+    assert parallel.run_jobs(square, [3, 1, 2], workers=2, total=3, method="spawn") == [9, 1, 4]
+
+
+def test_the_workers_start_from_a_forkserver_unless_told(monkeypatch):
+    import pytest
+
+    monkeypatch.delenv(parallel.START_METHOD_VAR, raising=False)
+    assert parallel.start_method() == "forkserver"
+    monkeypatch.setenv(parallel.START_METHOD_VAR, "spawn")
+    assert parallel.start_method() == "spawn"
+    monkeypatch.setenv(parallel.START_METHOD_VAR, "fork")
+    with pytest.raises(parallel.StageError, match="LFDT_WORKER_START='fork': expected one of forkserver, spawn"):
+        parallel.start_method()
 
 
 def test_a_failing_job_stops_the_stage_named():
