@@ -151,6 +151,25 @@ def test_second_half_artifacts(project):
         assert int(rows[m][header.index("path_successes")]) <= int(rows[m][header.index("successes")])
 
 
+def test_a_translators_diagnostics_are_recomputed_bit_for_bit(project, tmp_path):
+    """tools/check_diagnostics.py recomputes a seed's translator diagnostics from its saved translators and finds the
+    report's values; a report value changed by one bit is named."""
+    dst, _ = project
+    tool = [sys.executable, str(smoke.ROOT / "tools" / "check_diagnostics.py"), "--method", "lfdt", "--demos", "3",
+            "--seed", "0"]
+    ok = subprocess.run([*tool, "--root", str(dst)], capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0 and "match" in ok.stdout, ok.stdout + ok.stderr
+    other = tmp_path / "p"
+    (other / "reports" / "translator").mkdir(parents=True)
+    for name in ("params.yaml", "dvc.yaml", "models", "data"):
+        (other / name).symlink_to(dst / name)
+    rep = json.loads((dst / "reports/translator/lfdt-d3.json").read_text())
+    rep["seeds"]["0"]["diag/hand_across_m"] = float.fromhex("0x1p-52") + rep["seeds"]["0"]["diag/hand_across_m"]
+    (other / "reports/translator/lfdt-d3.json").write_text(json.dumps(rep))
+    bad = subprocess.run([*tool, "--root", str(other)], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 1 and "DIFFERS diag/hand_across_m" in bad.stdout, bad.stdout + bad.stderr
+
+
 def test_metrics_hold_no_bookkeeping(project):
     """Run ids, wall times and speeds live in runs/, never in a report (an identical rerun must not change one);
     every report has its bookkeeping twin. `dvc metrics show` lists the three headline files alone."""
