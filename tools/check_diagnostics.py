@@ -21,16 +21,15 @@ from pathlib import Path
 import torch
 import yaml
 
-from lfdt import data, layout, numerics
+from lfdt import layout, numerics
 from lfdt.box_push_jobs.common import DYNAMICS_FILE, LAYOUT
-from lfdt.box_push_jobs.translator import box_push_kinematics
+from lfdt.box_push_jobs.translator import box_push_kinematics, measure_translation, seed_demos
 from lfdt.config import load_params
 from lfdt.dynamics import load_models, load_random_y
 from lfdt.errors import InputError, StageError
 from lfdt.nets import load_state
-from lfdt.tasks.box_push.env import replay_check
-from lfdt.translation.apply import translate_demos, translation_diagnostics, translator_diagnostics
-from lfdt.translation.model import MeanTranslator, Translator, method_config
+from lfdt.translation.model import method_config
+from lfdt.translation.training import new_translator
 from lfdt.translation.transitions import load_x_transitions
 
 
@@ -44,7 +43,7 @@ def dvc_paths(root: Path) -> dict[str, dict[str, str]]:
 
 def recompute(root: Path, method: str, demos: int, seed: int) -> dict[str, float]:
     """The diagnostics of ``method``'s translator for ``demos`` demonstrations and training seed ``seed``, as the
-    translator stage computes them (restart 0's under the plain names)."""
+    translator stage computes them (:func:`~lfdt.box_push_jobs.translator.measure_translation`)."""
     torch.set_num_threads(1)
     p = load_params(root / "params.yaml")
     paths = {k: root / v for k, v in dvc_paths(root)["paths"].items()}
@@ -55,25 +54,14 @@ def recompute(root: Path, method: str, demos: int, seed: int) -> dict[str, float
     random_x = {pr: load_x_transitions(paths["random"] / f"{pr}.parquet", pr, tl=LAYOUT, kind="random")
                 for pr in layout.PAIRINGS}
     y_random = load_random_y(paths["random"] / "Y.parquet", LAYOUT).y
-    episodes = {pr: data.demo_subset(path, demos, seed, pr) for pr, path in demo_paths.items()}
-    demos_all = {pr: load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=LAYOUT, with_actions=True, kind="demos")
-                 for pr in layout.PAIRINGS}
+    episodes, demos_all = seed_demos(demo_paths, demos, seed)
     folder = paths["translators"] / f"{method}-d{demos}" / f"s{seed}"
     files = sorted(folder.glob("translator*.pt"))
     if not files:
         raise InputError(f"{folder} holds no translator*.pt (dvc pull, or dvc repro the translator stage)")
-    y_cols = LAYOUT.state_columns("Y")
-    d_cols = None if tcfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in LAYOUT.object_cols]
-    trs = [load_state(Translator(list(tcfg.hidden), LAYOUT, kinematics=kin if tcfg.kinematics == "forward" else None,
-                                 d_cols=d_cols, hand_offset=tcfg.hand_offset), f) for f in files]
-    with torch.no_grad():
-        out = translator_diagnostics(trs[0], dyn, tcfg, demos_all, random_x, y_random, tl=LAYOUT, kinematics=kin,
-                                     seed=seed)
-        df = translate_demos(MeanTranslator(trs), dyn, demo_paths, episodes, tcfg,
-                             p.env.timestep * p.env.frame_skip, LAYOUT)
-        out.update(translation_diagnostics(df, demo_paths, episodes, LAYOUT))
-        out.update(replay_check(df, p.env))
-    return out
+    trs = [load_state(new_translator(tcfg, LAYOUT, kin), f) for f in files]
+    return measure_translation(trs, dyn, tcfg, demo_paths, episodes, demos_all, random_x, y_random, kin, p.env,
+                               seed)[1]
 
 
 def main() -> None:

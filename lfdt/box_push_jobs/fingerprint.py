@@ -217,33 +217,25 @@ def _pushes(random_y_table, dyn) -> str:
 
 
 def _diagnostics(pushes: dict, dyn) -> str:
-    from lfdt.box_push_jobs.translator import box_push_kinematics
+    from lfdt.box_push_jobs.translator import box_push_kinematics, measure_translation
     from lfdt.config import EnvConfig
     from lfdt.tasks.box_push import columns as box_columns
-    from lfdt.tasks.box_push.env import replay_check
-    from lfdt.translation.apply import translate_demos, translation_diagnostics, translator_diagnostics
-    from lfdt.translation.model import MeanTranslator
     from lfdt.translation.transitions import load_x_transitions
 
     env_cfg = EnvConfig()
     tl = box_columns.BOX_PUSH
-    tr, cfg = pushes["translator"], pushes["cfg"]
-    with tempfile.TemporaryDirectory() as tmp, torch.no_grad():
-        paths, demos, randoms = {}, {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths, demos = {}, {}
         for p in layout.PAIRINGS:
             table = pushes["tables"][p]
             meta = {**data.read_schema_metadata(table.schema), "kind": "demos"}  # the pushes stand in for demos
             paths[p] = data.write_table(table.replace_schema_metadata({data.META_KEY: json.dumps(meta).encode()}),
                                         Path(tmp) / f"{p}.parquet")
             demos[p] = load_x_transitions(paths[p], p, tl=tl, with_actions=True, kind="demos")
-            randoms[p] = load_x_transitions(paths[p], p, tl=tl, kind="demos")
         episodes = {p: sorted(int(e) for e in np.unique(demos[p].episode)) for p in layout.PAIRINGS}
-        diag = translator_diagnostics(tr, dyn, cfg, demos, randoms, pushes["y"], tl=tl,
-                                      kinematics=box_push_kinematics(env_cfg), max_random=200, seed=4)
-        df = translate_demos(MeanTranslator([tr]), dyn, paths, episodes, cfg, env_cfg.timestep * env_cfg.frame_skip,
-                             tl)
-        diag.update(translation_diagnostics(df, paths, episodes, tl))
-        diag.update(replay_check(df, env_cfg))
+        # the translator stage's own measurement, with the pushes as its random motion too
+        df, diag = measure_translation([pushes["translator"]], dyn, pushes["cfg"], paths, episodes, demos, demos,
+                                       pushes["y"], box_push_kinematics(env_cfg), env_cfg, seed=4, max_random=200)
     return _hash(df.select_dtypes("number").to_numpy(), np.array([diag[k] for k in sorted(diag)], dtype=np.float64))
 
 

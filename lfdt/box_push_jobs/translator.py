@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import contextlib
 import time
+from pathlib import Path
 
+import pandas as pd
 import torch
 
 from lfdt import data, layout, mlflow_runs
@@ -21,7 +23,7 @@ from lfdt.translation.kinematics import ArmKinematics, Kinematics
 from lfdt.translation.model import MeanTranslator, method_config
 from lfdt.translation.restarts import restart_key, restart_log, restart_seed
 from lfdt.translation.training import Member, train_translators
-from lfdt.translation.transitions import canonical_x_columns, load_x_transitions, split_held_out
+from lfdt.translation.transitions import Transitions, canonical_x_columns, load_x_transitions, split_held_out
 
 
 def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list[dict]:
@@ -41,10 +43,7 @@ def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list
     y_random = load_random_y(first.random_dir / "Y.parquet", LAYOUT).y
     per_seed = []
     for cfg in cfgs:
-        episodes = {pr: data.demo_subset(path, cfg.demos, cfg.seed, pr) for pr, path in demo_paths.items()}
-        demos_all = {pr: load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=LAYOUT, with_actions=True,
-                                            kind="demos")
-                     for pr in layout.PAIRINGS}
+        episodes, demos_all = seed_demos(demo_paths, cfg.demos, cfg.seed)
         demos, held = split_held_out(demos_all, tcfg.holdout_fraction, cfg.seed)
         per_seed.append((episodes, demos_all, demos, held))
     with contextlib.ExitStack() as runs_stack:
@@ -79,8 +78,8 @@ def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_
             "x_columns": {pr: canonical_x_columns(pr, LAYOUT) for pr in layout.PAIRINGS},
             "y_columns": LAYOUT.state_columns("Y"), "episodes": episodes,
             "held_out_episodes": {pr: sorted(set(h.episode.tolist())) for pr, h in (held or {}).items()}})
-    df = translate_demos(MeanTranslator(trs), dyn, demo_paths, episodes, tcfg, env_cfg.timestep * env_cfg.frame_skip,
-                         LAYOUT)
+    df, diag = measure_translation(trs, dyn, tcfg, demo_paths, episodes, demos_all, random_x, y_random, kin, env_cfg,
+                                   cfg.seed)
     table = translated_table(df, {
         "kind": "translated", "domain": "Y", **cfg.tags(), "translator": tcfg.model_dump(),
         "source_episodes": episodes, "layout": box_columns.describe(),
@@ -88,15 +87,6 @@ def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_
                        f"({'F^-1(y_hat_t, y_hat_t+1)' if tcfg.labels == 'inverse' else 'recorded robot + F^-1'})"},
         LAYOUT)
     data.write_table(table, cfg.dir(cfg.bc_data_dir) / DATA_FILE["translated"])
-    with torch.no_grad():
-        replay = replay_check(df, env_cfg)
-        # G and D of each restart on their own; restart 0 under the plain names
-        diag = {}
-        for r, tr in enumerate(trs):
-            d = translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=LAYOUT, kinematics=kin,
-                                       seed=cfg.seed)
-            diag.update({restart_key(r, k): v for k, v in d.items()})
-    diag.update(translation_diagnostics(df, demo_paths, episodes, LAYOUT))
     stats = dict(all_stats[0])
     curve = stats.pop("curve")
     restarts = {}  # the other restarts' selection and final losses (their curves are in MLflow)
@@ -105,11 +95,39 @@ def _finish(cfg: Config, run, trs, all_stats, episodes, demos_all, held, random_
         st.pop("curve")
         restarts.update({restart_key(r, f"final/{k}"): v for k, v in st.pop("final").items()})
         restarts.update({restart_key(r, k): v for k, v in st.items()})
-    metrics = {**cfg.tags(), **replay, **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
+    metrics = {**cfg.tags(), **diag, **{f"final/{k}": v for k, v in stats.pop("final").items()},
                **stats, **restarts, "translated_transitions": len(df), "job_wall_s": time.perf_counter() - t0,
                "mlflow_run_id": run.run_id}
     run.metrics(numeric(metrics))
     return {"metrics": metrics, "curve": [{"seed": cfg.seed, **c} for c in curve]}
+
+
+def seed_demos(demo_paths: dict[str, Path], demos: int, seed: int) -> tuple[dict[str, list[int]],
+                                                                          dict[str, Transitions]]:
+    """A training seed's demonstrations of each pairing: their episode indices and their transitions (with the real
+    robot's recorded actions, for the diagnostics)."""
+    episodes = {pr: data.demo_subset(path, demos, seed, pr) for pr, path in demo_paths.items()}
+    return episodes, {pr: load_x_transitions(demo_paths[pr], pr, episodes[pr], tl=LAYOUT, with_actions=True,
+                                             kind="demos") for pr in layout.PAIRINGS}
+
+
+def measure_translation(trs: list, dyn, tcfg, demo_paths: dict[str, Path], episodes: dict[str, list[int]],
+                        demos_all: dict[str, Transitions], random_x: dict[str, Transitions], y_random, kin: Kinematics,
+                        env_cfg: EnvConfig, seed: int, max_random: int = 20_000) -> tuple[pd.DataFrame, dict]:
+    """Translate one seed's demonstrations with the mean of its translators (restarts) and measure them, as the
+    translator stage reports them: the open-loop replay of the labels in MuJoCo, each restart's G and D on their own
+    (restart 0 under the plain names) and the translation against its source. Returns the translated transitions and
+    the measurements."""
+    df = translate_demos(MeanTranslator(trs), dyn, demo_paths, episodes, tcfg, env_cfg.timestep * env_cfg.frame_skip,
+                         LAYOUT)
+    with torch.no_grad():
+        out = replay_check(df, env_cfg)
+        for r, tr in enumerate(trs):
+            d = translator_diagnostics(tr, dyn, tcfg, demos_all, random_x, y_random, tl=LAYOUT, kinematics=kin,
+                                       max_random=max_random, seed=seed)
+            out.update({restart_key(r, k): v for k, v in d.items()})
+    out.update(translation_diagnostics(df, demo_paths, episodes, LAYOUT))
+    return df, out
 
 
 def box_push_kinematics(env_cfg: EnvConfig) -> Kinematics:

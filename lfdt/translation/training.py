@@ -111,11 +111,8 @@ def train_translators(members: list[Member], random_x: dict[str, Transitions], y
         prm.requires_grad_(False)
     if cfg.kinematics == "forward" and kinematics is None:
         raise ValueError("translator.kinematics = 'forward' needs the arms' kinematics; this task has none")
-    y_cols = tl.state_columns("Y")
-    d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
     gens = [torch.Generator().manual_seed(m.seed) for m in members]
-    tr = Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
-                    d_cols=d_cols, hand_offset=cfg.hand_offset, n=len(members), generators=gens)
+    tr = new_translator(cfg, tl, kinematics, n=len(members), generators=gens)
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
@@ -126,6 +123,16 @@ def train_translators(members: list[Member], random_x: dict[str, Transitions], y
                             progress, tl, device)
     finally:
         dyn.cpu()
+
+
+def new_translator(cfg: TranslatorConfig, tl: TaskLayout, kinematics: Kinematics | None = None, n: int = 1,
+                   generators: list[torch.Generator] | None = None) -> Translator:
+    """An untrained translator of ``cfg`` (a stack of ``n``): what :func:`train_translators` trains, and what a
+    saved one loads into (:func:`lfdt.nets.load_state`)."""
+    y_cols = tl.state_columns("Y")
+    d_cols = None if cfg.disc_input == "state" else [i for i, c in enumerate(y_cols) if c not in tl.object_cols]
+    return Translator(list(cfg.hidden), tl, kinematics=kinematics if cfg.kinematics == "forward" else None,
+                      d_cols=d_cols, hand_offset=cfg.hand_offset, n=n, generators=generators)
 
 
 def train_translator(demos: dict[str, Transitions], random_x: dict[str, Transitions], y_random: np.ndarray,
