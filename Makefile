@@ -41,6 +41,7 @@ benchmarks: setup  ## every speed ratio in benchmarks/ (results in benchmarks/re
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/training_throughput.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/parallel_speedup.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/worker_start.py --smoke 1
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python benchmarks/optimizer_start.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" MUJOCO_GL=egl $(BIN)/python benchmarks/sweep_vs_repro.py
 
 docs: setup  ## write the numbers of README.md and docs/ from reports/ and benchmarks/results/

@@ -153,7 +153,8 @@ def translator_diagnostics(root: Path) -> str:
 
 
 def benchmarks(root: Path) -> str:
-    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json, worker_start.json)."""
+    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json, worker_start.json,
+    optimizer_start.json)."""
     res = root / "benchmarks" / "results"
     lines = ["| benchmark | ours | baseline | ratio | goal |", "| --- | --- | --- | --- | --- |"]
     st = _read_json(res / "stack_throughput.json")
@@ -177,9 +178,16 @@ def benchmarks(root: Path) -> str:
         lines.append(f"| the smoke DAG's `dvc repro`: spawn vs forkserver (s, wall; lower is better) | "
                      f"{sm['forkserver']:.0f} | {sm['spawn']:.0f} | "
                      f"**{ws['smoke_ratio_wall_spawn_over_forkserver']:.2f}** | |")
+    os_ = _read_json(res / "optimizer_start.json")
+    med = os_["median"]
+    lines.append(f"| a training process to its first optimizer step: torch's compiler imported (as torch's optimizer "
+                 f"wrapping did) vs not (s, CPU; lower is better) | {med['without_compiler']['cpu_s']:.2f} | "
+                 f"{med['with_compiler']['cpu_s']:.2f} | **{os_['ratio_cpu_with_over_without']:.2f}** | |")
     lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']}, "
               f"{pc['date']}, medians of {pc['repeats']}. Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
-              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's time / forkserver's."]
+              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's time / forkserver's. "
+              f"Optimizer start: {os_['cpu_model']}, {os_['date']}, medians of {os_['repeats']} processes each way; "
+              f"ratio = with the compiler / without."]
     return "\n".join(lines)
 
 

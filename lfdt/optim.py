@@ -18,6 +18,24 @@ import torch
 
 from lfdt import numerics
 
+_DYNAMO_WRAPPED = ("add_param_group", "zero_grad", "state_dict", "load_state_dict")
+"""The methods of :class:`torch.optim.Optimizer` that torch wraps in ``torch._disable_dynamo``."""
+
+
+def _without_dynamo_import() -> None:
+    """Let every optimizer's first ``add_param_group`` (its construction), ``zero_grad``, ``state_dict`` and
+    ``load_state_dict`` skip importing ``torch._dynamo``. torch wraps those four in ``torch._disable_dynamo``, which
+    imports the compiler (about 1.5 s of CPU, in every worker process of every training stage) to mark them as not
+    to be compiled, and caches the result on the function as ``__dynamo_disable``. The project never compiles, so
+    the cache is set to the function itself: eager calls run the same code, the same bits (tests/test_optim.py)."""
+    for name in _DYNAMO_WRAPPED:
+        inner = getattr(getattr(torch.optim.Optimizer, name), "__wrapped__", None)
+        if inner is not None and getattr(inner, "__dynamo_disable", None) is None:
+            setattr(inner, "__dynamo_disable", inner)
+
+
+_without_dynamo_import()
+
 
 class _NumpyAdam(torch.optim.Optimizer):
     """Adam (Kingma & Ba) on CPU float32 parameters, arithmetic in NumPy; no weight decay, no amsgrad."""

@@ -8,6 +8,7 @@ the README's commands bring back (:func:`test_what_dvc_removes_comes_back_by_the
 import json
 import shutil
 import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -61,8 +62,8 @@ def test_a_bad_input_stops_repro_before_any_output_is_removed(smoke_project, mon
     assert json.loads(smoke.dvc(["status", "--json"], dst)) == {}
 
 
-RESTORE = {True: "dvc checkout <stage>", False: "git checkout -- <file>"}
-"""The README's command that brings back an output DVC removed, by whether DVC caches it ("When a stage fails")."""
+RESTORE = "python -m lfdt.restore"
+"""The README's command that brings back what DVC removed, every kind of output ("When a stage fails")."""
 
 
 def _files(path: Path) -> dict[str, bytes]:
@@ -70,43 +71,101 @@ def _files(path: Path) -> dict[str, bytes]:
             if f.is_file()}
 
 
+def _restore(dst: Path, *stages: str, fails: bool = False) -> str:
+    proc = subprocess.run([sys.executable, "-m", "lfdt.restore", *stages], cwd=dst, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == (2 if fails else 0), f"{RESTORE} {' '.join(stages)}: exit {proc.returncode}\n" \
+                                                   f"{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
+    return proc.stdout + proc.stderr
+
+
+def _readme_section() -> str:
+    readme = (smoke.ROOT / "README.md").read_text()
+    return readme[readme.index("**When a stage fails.**"):].split("\n\n", 1)[0]
+
+
+def _kept_by_dvc(stage) -> bool:
+    """Whether DVC's run cache keeps a copy of the stage's ``cache: false`` outputs: only where all are metrics or
+    plots (DVC's Stage.run)."""
+    return all(o.use_cache or o.is_metric or o.is_plot for o in stage.outs)
+
+
 def test_what_dvc_removes_comes_back_by_the_readme_command(smoke_project):
     """For every kind of output dvc.yaml has (cached or not, a file or a folder, an output, a metric or a plot,
-    persistent or not), one output of that kind, removed as DVC removes it before running its stage, comes back byte
-    for byte by the command the README names for it. The project is committed first, as a clone of this repository
-    is (the ``cache: false`` files with dvc.lock)."""
+    persistent or not, of a stage DVC's run cache keeps or not), one output of that kind, removed as DVC removes it
+    before running its stage, comes back byte for byte by the README's command, though none of them was committed
+    to git, where DVC keeps a copy; each of the others is named by that command (exit 2) and comes back, as
+    committed, by `git checkout -- <file>`."""
     from dvc.repo import Repo
 
-    readme = (smoke.ROOT / "README.md").read_text()
-    section = readme[readme.index("**When a stage fails.**"):].split("\n\n", 1)[0]
-    assert all(f"`{command}`" in section for command in RESTORE.values()), section
+    assert f"`{RESTORE} <stage>`" in _readme_section() and "`git checkout -- <file>`" in _readme_section()
     dst = smoke_project.root
     kinds: dict[tuple, tuple[str, Path]] = {}
     with Repo(str(dst)) as repo:
         for stage in repo.index.stages:
             for out in stage.outs:
                 path = dst / str(out.def_path)
-                kind = (out.use_cache, bool(out.metric), bool(out.plot), bool(out.persist),
-                        path.is_dir() or bool(out.hash_info and out.hash_info.isdir))
-                kinds.setdefault(kind, (stage.name, path))  # name: the addressing is relative to the cwd
-    assert len(kinds) >= 6, kinds  # at least: cached file and folder; uncached file, folder, metric and plot
-    uncached = [path for (cached, *_), (_, path) in kinds.items() if not cached]
+                kind = (out.use_cache or _kept_by_dvc(stage), out.use_cache, bool(out.metric), bool(out.plot),
+                        bool(out.persist), path.is_dir() or bool(out.hash_info and out.hash_info.isdir))
+                kinds.setdefault(kind, (stage.name, path))  # name: addressing is relative to the cwd
+    assert len(kinds) >= 8, kinds  # cached file and folder; uncached metric and plot, kept or not; plain file, folder
+    assert {k[0] for k in kinds if not k[1]} == {True, False}, kinds
+    paths = {kind: path for kind, (_, path) in kinds.items()}
+    rel = {kind: str(path.relative_to(dst)) for kind, path in paths.items()}
+    tracked = subprocess.run(["git", "ls-files", "--", *rel.values()], cwd=dst, capture_output=True, text=True,
+                             check=True).stdout.split()
+    assert not tracked, f"committed to git, so this test would not show they come back without it: {tracked}"
     git = ["git", "-c", "user.name=t", "-c", "user.email=t@t"]
-    committed = ["dvc.lock", *map(str, uncached)]
+    committed = ["dvc.lock", *(rel[k] for k in kinds if not k[0])]
     subprocess.run([*git, "add", "-f", "--", *committed], cwd=dst, check=True)
-    subprocess.run([*git, "commit", "-qm", "outputs as committed", "--allow-empty", "--", *committed], cwd=dst,
-                   check=True)
-    before = {kind: _files(path) for kind, (_, path) in kinds.items()}
-    for _, path in kinds.values():
+    subprocess.run([*git, "commit", "-qm", "what DVC keeps no copy of", "--", *committed], cwd=dst, check=True)
+    before = {kind: _files(path) for kind, path in paths.items()}
+    for path in paths.values():
         if path.is_dir():
             shutil.rmtree(path)
         else:
             path.unlink()
-    for kind, (stage, path) in kinds.items():
-        command = RESTORE[kind[0]].replace("<stage>", stage).replace("<file>", str(path.relative_to(dst)))
-        if command.startswith("dvc "):
-            smoke.dvc(command.split()[1:], dst)
-        else:
-            subprocess.run(command.split(), cwd=dst, check=True)
-    lost = [path for kind, (_, path) in kinds.items() if _files(path) != before[kind]]
-    assert not lost, f"not brought back byte for byte by the README's command: {lost}"
+    out = _restore(dst, *sorted({stage for stage, _ in kinds.values()}), fails=True)
+    named = {line.split(":")[1].strip() for line in out.splitlines() if line.startswith("error: ")}
+    assert named == {rel[k] for k in kinds if not k[0]}, out
+    assert all(f"`git checkout -- {rel[k]}`" in out for k in kinds if not k[0]), out
+    lost = [rel[k] for k in kinds if k[0] and _files(paths[k]) != before[k]]
+    assert not lost, f"not brought back byte for byte by `{RESTORE}`: {lost}\n{out}"
+    for k in kinds:
+        if not k[0]:
+            subprocess.run(["git", "checkout", "--", rel[k]], cwd=dst, check=True)
+    lost = [rel[k] for k in kinds if _files(paths[k]) != before[k]]
+    assert not lost, f"not brought back byte for byte by `git checkout`: {lost}"
+
+
+def test_a_failing_stage_s_outputs_come_back_and_a_newer_file_stays(smoke_project):
+    """A real failure: `dvc repro -f -s fit_dynamics` with a tracking server that does not answer stops with a named
+    error after DVC removed the stage's outputs (its models, a folder DVC caches; its curve, a ``cache: false`` plot);
+    the README's command brings each back byte for byte (the curve was never committed to git), DVC sees the stage
+    up to date, and a second call finds nothing to do. A ``cache: false`` file that is in the workspace is never
+    overwritten (it may be newer than dvc.lock)."""
+    dst = smoke_project.root
+    models, curve = dst / "models/dynamics", dst / "reports/dynamics_curve.csv"
+    before = {p: _files(p) for p in (models, curve)}
+    assert all(before.values())
+    failed = smoke.dvc(["repro", "-f", "-s", "fit_dynamics"], dst, fails=True, tracking_uri="http://127.0.0.1:9")
+    assert "error:" in failed and "127.0.0.1:9" in failed, failed[-2000:]
+    assert not models.exists() and not curve.exists(), "DVC kept the outputs of the failing stage: this test shows " \
+                                                       "nothing"
+    out = _restore(dst, "fit_dynamics")
+    assert {p: _files(p) for p in (models, curve)} == before, out
+    assert "copied back  reports/dynamics_curve.csv" in out, out
+    assert "up to date" in smoke.dvc(["status", "fit_dynamics"], dst)
+    assert _restore(dst, "fit_dynamics").startswith("nothing to bring back"), "a second call did something"
+    curve.write_text("newer than dvc.lock\n")
+    try:
+        assert _restore(dst, "fit_dynamics").startswith("nothing to bring back")
+        assert curve.read_text() == "newer than dvc.lock\n"
+    finally:
+        curve.write_bytes(before[curve][curve.as_posix()])
+
+
+def test_restore_names_a_stage_dvc_lock_does_not_have(smoke_project):
+    """A stage that dvc.lock does not name is one line naming it, exit 2."""
+    out = _restore(smoke_project.root, "no_such_stage", fails=True)
+    assert out.count("\n") == 1 and "dvc.lock names no stage 'no_such_stage'" in out, out

@@ -1,0 +1,152 @@
+"""``python -m lfdt.restore [STAGE ...]``: bring back the outputs that DVC removed, as ``dvc.lock`` names them.
+
+DVC removes a stage's outputs before it runs the stage; when the stage then fails, ``dvc checkout`` brings back the
+cached ones but skips those ``dvc.yaml`` marks ``cache: false``. Of a stage whose ``cache: false`` outputs are all
+metrics or plots (the experts' curves and ``reports/experts.json``, the dynamics curve), DVC's run cache keeps a copy
+in the same local cache whenever the stage succeeded: this command checks out the cached outputs and copies those
+back from that copy, by the hashes ``dvc.lock`` names, so results never committed to git come back as well. DVC keeps
+no copy of the ``cache: false`` outputs of the four stages that also have plain ones (``fingerprint``, ``report``,
+``register_policies``, ``twin_report``: DVC does not run-cache them): each such output that is missing is named, with
+the git command that brings back its last committed version.
+An output that is in the workspace is left as it is (it may be newer than ``dvc.lock``).
+
+Examples::
+
+    python -m lfdt.restore                       # every stage of dvc.lock
+    python -m lfdt.restore summarize_experts report
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lfdt.errors import InputError, StageError
+
+
+class NotRestorable(StageError):
+    """Outputs that ``dvc.lock`` names but neither the cache nor the run cache holds."""
+
+
+@dataclass
+class Restored:
+    """What :func:`restore` did, by output path (relative to the project)."""
+
+    checked_out: list[str] = field(default_factory=list)
+    """Cached outputs that ``dvc checkout`` brought back."""
+    copied: list[str] = field(default_factory=list)
+    """``cache: false`` outputs copied back from the run cache's copy."""
+    missing: list[str] = field(default_factory=list)
+    """``cache: false`` outputs absent from the workspace whose copy the cache does not hold."""
+    stages: dict[str, str] = field(default_factory=dict)
+    """The stage of each missing output."""
+
+
+@contextlib.contextmanager
+def _quiet_dvc():
+    log = logging.getLogger("dvc")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
+def _locked_stages(root: Path) -> dict[str, dict]:
+    import yaml
+
+    from lfdt.inputs import read_text
+
+    lock = root / "dvc.lock"
+    text = read_text(lock, what="DVC's lock file (written by `dvc repro`)")
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise InputError(f"{lock}: not YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("stages"), dict):
+        raise InputError(f"{lock}: expected a `stages:` mapping, as `dvc repro` writes it")
+    return data["stages"]
+
+
+def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
+    """Bring back the outputs of ``stages`` (default: every stage of ``dvc.lock``) in the DVC project at ``root``:
+    the cached ones by ``dvc checkout``, the ``cache: false`` ones that are absent by copying them from the local
+    cache by their ``dvc.lock`` hash. Existing ``cache: false`` files are never overwritten."""
+    from dvc.repo import Repo
+
+    root = Path(root).resolve()
+    locked = _locked_stages(root)
+    unknown = [s for s in stages or [] if s not in locked]
+    if unknown:
+        raise InputError(f"{root / 'dvc.lock'} names no stage {unknown[0]!r} (stages: "
+                         f"{', '.join(sorted(locked)[:8])}{', ...' if len(locked) > 8 else ''})")
+    names = list(stages) if stages else list(locked)
+    done = Restored()
+    with contextlib.chdir(root), Repo(str(root)) as repo:  # DVC resolves some paths against the cwd
+        uncached = {(s.name, str(o.def_path)) for s in repo.index.stages for o in s.outs if not o.use_cache}
+        cached = [n for n in names if any(o.get("path") and (n, o["path"]) not in uncached
+                                          for o in locked[n].get("outs", []))]
+        if cached:
+            from dvc.exceptions import DvcException
+
+            try:
+                with _quiet_dvc():
+                    stats = repo.checkout(targets=cached)
+            except DvcException as e:  # e.g. a cached output changed in the workspace and not saved anywhere
+                raise NotRestorable(f"dvc checkout of {', '.join(cached[:3])}{', ...' if len(cached) > 3 else ''} "
+                                    f"in {root}: {str(e).splitlines()[0]}") from None
+            done.checked_out = sorted(str(p) for p in stats.get("added", []) + stats.get("modified", []))
+        cache = repo.stage_cache
+        for name in names:
+            entry = locked[name]
+            wanted = [o["path"] for o in entry.get("outs", []) if (name, o.get("path")) in uncached
+                      and not (root / o["path"]).exists()]
+            if not wanted or "cmd" not in entry:
+                continue
+            copy = cache._create_stage(entry)  # the run cache's own way back to its uncached outputs
+            with cache._cache_type_copy(), _quiet_dvc():
+                for out in copy.outs:
+                    if out.def_path not in wanted:
+                        continue
+                    if out.hash_info and out.cache.exists(out.hash_info.value) and not out.changed_cache():
+                        out.checkout()
+                        done.copied.append(out.def_path)
+                    else:
+                        done.missing.append(out.def_path)
+                        done.stages[out.def_path] = name
+    return done
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The command line; exit 0 when every output named is back, 2 (one line per output) when some could not be."""
+    p = argparse.ArgumentParser(prog="python -m lfdt.restore", description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog=__doc__.split("\n\n", 1)[1])
+    p.add_argument("stages", nargs="*", help="stages as dvc.lock names them (e.g. train_bc@lfdt-50); default all")
+    p.add_argument("--root", default=".", help="the DVC project (default the current folder)")
+    args = p.parse_args(argv)
+    try:
+        done = restore(args.root, args.stages)
+    except StageError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for path in done.checked_out:
+        print(f"checked out  {path}")
+    for path in done.copied:
+        print(f"copied back  {path}  (cache: false; the run cache's copy)")
+    for path in done.missing:
+        print(f"error: {path}: not in the workspace, and DVC's cache holds no copy of the version dvc.lock names "
+              f"(DVC keeps none for a stage with plain `cache: false` outputs): `git checkout -- {path}` brings back "
+              f"its last committed version, `dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
+    if not (done.checked_out or done.copied or done.missing):
+        print("nothing to bring back: every output that dvc.lock names is in the workspace")
+    return 2 if done.missing else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
