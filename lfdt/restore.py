@@ -70,6 +70,9 @@ def _locked_stages(root: Path) -> dict[str, dict]:
         raise InputError(f"{lock}: not YAML ({str(e).splitlines()[0]})") from None
     if not isinstance(data, dict) or not isinstance(data.get("stages"), dict):
         raise InputError(f"{lock}: expected a `stages:` mapping, as `dvc repro` writes it")
+    bad = [name for name, entry in data["stages"].items() if not isinstance(entry, dict)]
+    if bad:
+        raise InputError(f"{lock}: stage {bad[0]!r} is not a mapping (cmd, deps, outs), as `dvc repro` writes it")
     return data["stages"]
 
 
@@ -77,6 +80,7 @@ def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
     """Bring back the outputs of ``stages`` (default: every stage of ``dvc.lock``) in the DVC project at ``root``:
     the cached ones by ``dvc checkout``, the ``cache: false`` ones that are absent by copying them from the local
     cache by their ``dvc.lock`` hash. Existing ``cache: false`` files are never overwritten."""
+    from dvc.exceptions import DvcException
     from dvc.repo import Repo
 
     root = Path(root).resolve()
@@ -87,13 +91,15 @@ def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
                          f"{', '.join(sorted(locked)[:8])}{', ...' if len(locked) > 8 else ''})")
     names = list(stages) if stages else list(locked)
     done = Restored()
-    with contextlib.chdir(root), Repo(str(root)) as repo:  # DVC resolves some paths against the cwd
+    try:
+        repo = Repo(str(root))
+    except DvcException as e:
+        raise InputError(f"{root}: not a DVC project ({str(e).splitlines()[0]})") from None
+    with contextlib.chdir(root), repo:  # DVC resolves some paths against the cwd
         uncached = {(s.name, str(o.def_path)) for s in repo.index.stages for o in s.outs if not o.use_cache}
         cached = [n for n in names if any(o.get("path") and (n, o["path"]) not in uncached
                                           for o in locked[n].get("outs", []))]
         if cached:
-            from dvc.exceptions import DvcException
-
             try:
                 with _quiet_dvc():
                     stats = repo.checkout(targets=cached)

@@ -169,3 +169,23 @@ def test_restore_names_a_stage_dvc_lock_does_not_have(smoke_project):
     """A stage that dvc.lock does not name is one line naming it, exit 2."""
     out = _restore(smoke_project.root, "no_such_stage", fails=True)
     assert out.count("\n") == 1 and "dvc.lock names no stage 'no_such_stage'" in out, out
+
+
+@pytest.mark.parametrize(("lock", "dvc_project", "says"), [
+    (None, True, "dvc.lock: no such file"),
+    ("stages: [1\n", True, "dvc.lock: not YAML"),
+    ("schema: '2.0'\nstages: {a: 5}\n", True, "dvc.lock: stage 'a' is not a mapping"),
+    ("schema: '2.0'\nstages: {}\n", False, ": not a DVC project"),
+], ids=["no-lock", "lock-not-yaml", "stage-not-a-mapping", "not-a-dvc-project"])
+def test_restore_refuses_a_hostile_project_in_one_line(tmp_path, lock, dvc_project, says):
+    """The README's restore command on a project it cannot read: one line naming the file or folder, exit 2."""
+    if dvc_project:
+        (tmp_path / ".dvc").mkdir()
+        (tmp_path / ".dvc/config").write_text("")
+    if lock is not None:
+        (tmp_path / "dvc.lock").write_text(lock)
+    proc = subprocess.run([sys.executable, "-m", "lfdt.restore", "--root", str(tmp_path)], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2 and not proc.stdout, proc.stdout + proc.stderr
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ") and says in proc.stderr, proc.stderr
+    assert str(tmp_path) in proc.stderr, proc.stderr
