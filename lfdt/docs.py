@@ -267,10 +267,19 @@ ENSEMBLES = {"lfdt": "ens5-lfdt", "bc_no_translation": "ens5-bc-no-translation"}
 """Method -> the trial of its five BC seeds' mean action."""
 
 
-def _outcomes(root: Path, trial: str, method: str, demos: int = 100) -> dict[int, float]:
+def _outcome_rows(root: Path, trial: str, method: str, demos: int | str = 100) -> dict[int, list[int]] | None:
+    """A development trial's 0/1 outcomes by seed (docs/experiments/outcomes/, the end-state rule), None if none."""
     path = root / "docs" / "experiments" / "outcomes" / f"{trial}_{method}-d{demos}.csv"
-    rows = list(csv.DictReader(path.open()))
-    return {int(r["seed"]): sum(c == "1" for c in r["outcomes"]) / len(r["outcomes"]) for r in rows}
+    if not path.exists():
+        return None
+    return {int(r["seed"]): [int(c) for c in r["outcomes"]] for r in csv.DictReader(path.open())}
+
+
+def _outcomes(root: Path, trial: str, method: str, demos: int = 100) -> dict[int, float]:
+    rows = _outcome_rows(root, trial, method, demos)
+    if rows is None:
+        raise FileNotFoundError(f"no outcomes of trial {trial} ({method}, {demos} demonstrations) in docs/experiments")
+    return {seed: sum(o) / len(o) for seed, o in rows.items()}
 
 
 def bc_seed_spread(root: Path) -> str:
@@ -315,7 +324,7 @@ def issue37(root: Path) -> str:
     pushes further out across the box than the hand did, its distance to the hand, the open-loop replay of the
     labels, and F's error on two-arm pushes across the box and in yaw (a share of predicting no change)."""
     rows = [r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
-            if r["trial"].startswith(ISSUE37_PREFIX)]
+            if r["trial"].startswith(ISSUE37_PREFIX) and SEARCH_MARK not in r["trial"]]
     lines = ["| trial | change | method | demos | success (worst seed) | path rule (worst seed) | path rule: vs BC "
              "w/o | replacing robot further out than the hand (cm) | replacing robot to the hand (cm) | replay of the "
              "labels solves | F on pushes: across / yaw |", "| --- |" + " --- |" * 10]
@@ -385,12 +394,62 @@ def load_test(root: Path) -> str:
     return "\n".join(lines)
 
 
+SEARCH_MARK = "-search-"
+"""What names a search's trials (``tools/dev_search.py``: ``<study>-t<n>``, its studies named ``i37-search-...``);
+they have a block of their own (:func:`search`)."""
+
+
+def search(root: Path) -> str:
+    """Each study of ``tools/dev_search.py`` (docs/experiments/search_<study>.csv): every finished trial with its knobs
+    and outcomes, and the best trial's paired difference from the baseline trial (the same seeds and start states)."""
+    import numpy as np
+
+    from lfdt.evaluation import paired_difference_interval
+
+    trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+              if r["method"] == "lfdt"}
+    out = []
+    for path in sorted((root / "docs" / "experiments").glob("search_*.csv")):
+        study = path.stem[len("search_"):]
+        rows = list(csv.DictReader(path.open()))
+        if not rows:
+            continue
+        knobs = [k for k in rows[0] if k.startswith("translator.")]
+        out += [f"**{study}**", "", "| trial | " + " | ".join(k.split(".", 1)[1] for k in knobs) +
+                " | success (worst seed) | path rule (worst seed) | per seed | wall (min) |",
+                "| --- |" + " --- |" * (len(knobs) + 4)]
+        for r in sorted(rows, key=lambda r: int(r["trial"])):
+            label = f"t{r['trial']}" + (" (params.yaml)" if r["trial"] == "0" else "")
+            out.append(f"| {label} | " + " | ".join(r[k] for k in knobs) + f" | {r['success_pct']} % "
+                       f"({r['worst_seed_pct']} %) | {r['path_success_pct']} % ({r['path_worst_seed_pct']} %) | "
+                       f"{r['per_seed_pct']} | {r['wall_min']} |")
+        first = trials.get(f"{study}-t0")
+        best = max(rows, key=lambda r: (float(r["success_pct"]), -int(r["trial"])))
+        demos = first["demos"] if first else ""
+        base = _outcome_rows(root, f"{study}-t0", "lfdt", demos)
+        top = _outcome_rows(root, f"{study}-t{best['trial']}", "lfdt", demos)
+        line = f"Best of {len(rows)} trials: t{best['trial']}, {best['success_pct']} %"
+        if base is not None and top is not None and best["trial"] != "0" and sorted(base) == sorted(top):
+            base, top = (np.array([r[s] for s in sorted(r)], dtype=float) for r in (base, top))
+            lo, hi = paired_difference_interval(top, base)
+            line += (f"; against t0, paired over the same seeds and start states: "
+                     f"{100 * (top - base).mean():+.1f} points (95 % interval {100 * lo:+.1f} to {100 * hi:+.1f}), "
+                     f"an interval that does not allow for having picked the best of {len(rows)}")
+        if first:
+            names = [f"{study}-t{r['trial']}" for r in rows]
+            dates = sorted({trials[n]["date"] for n in names if n in trials})
+            line += (f". LfDT at {demos} demonstrations, development seeds {first['seeds']}, development start "
+                     f"states; {first['cpu_model']} ({first['numerics']}), {dates[0]} to {dates[-1]}.")
+        out += ["", line, ""]
+    return "\n".join(out).rstrip()
+
+
 BLOCKS: dict[str, Callable[[Path], str]] = {
     "load_test": load_test,
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
     "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,
-    "bc_seed_spread": bc_seed_spread, "issue37": issue37, "probe_halves": probe_halves}
+    "bc_seed_spread": bc_seed_spread, "issue37": issue37, "probe_halves": probe_halves, "search": search}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)

@@ -27,3 +27,25 @@ def test_a_block_that_disagrees_is_named(tmp_path: Path):
 def test_an_unknown_block_is_an_error():
     with pytest.raises(KeyError, match="unknown generated block 'nope'"):
         docs.render_page("<!-- generated:nope -->\n<!-- /generated:nope -->\n")
+
+
+def test_a_search_block_pairs_its_best_trial_with_its_baseline(tmp_path: Path):
+    """The search block (tools/dev_search.py's studies) lists every trial and pairs the best with trial 0 over the
+    same seeds and start states."""
+    exp = tmp_path / "docs" / "experiments"
+    (exp / "outcomes").mkdir(parents=True)
+    fields = ["date", "trial", "method", "demos", "seeds", "cpu_model", "numerics"]
+    rows = [["2026-12-06", f"st-search-x-t{n}", "lfdt", "50", "40 41", "Some CPU", "pinned"] for n in (0, 1)]
+    (exp / "trials.csv").write_text("\n".join(",".join(r) for r in [fields, *rows]) + "\n")
+    outcomes = {0: {40: "1100", 41: "1000"}, 1: {40: "1110", 41: "1100"}}
+    for n, by_seed in outcomes.items():
+        (exp / "outcomes" / f"st-search-x-t{n}_lfdt-d50.csv").write_text(
+            "seed,outcomes\n" + "".join(f"{s},{o}\n" for s, o in by_seed.items()))
+    knobs = ["translator.lambda_dyn", "translator.lambda_side"]
+    (exp / "search_st-search-x.csv").write_text(
+        "trial," + ",".join(knobs) + ",success_pct,worst_seed_pct,per_seed_pct,path_success_pct,path_worst_seed_pct,"
+        "wall_min\n0,10.0,0.0,37.5,25.0,50.0 25.0,37.5,25.0,4.1\n1,3.0,10.0,62.5,50.0,75.0 50.0,62.5,50.0,4.3\n")
+    block = docs.search(tmp_path)
+    assert "| t0 (params.yaml) | 10.0 | 0.0 | 37.5 % (25.0 %) |" in block, block
+    assert "Best of 2 trials: t1, 62.5 %" in block and "+25.0 points" in block, block
+    assert "development seeds 40 41" in block and "Some CPU (pinned), 2026-12-06 to 2026-12-06" in block, block
