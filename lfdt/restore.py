@@ -73,6 +73,12 @@ def _locked_stages(root: Path) -> dict[str, dict]:
     bad = [name for name, entry in data["stages"].items() if not isinstance(entry, dict)]
     if bad:
         raise InputError(f"{lock}: stage {bad[0]!r} is not a mapping (cmd, deps, outs), as `dvc repro` writes it")
+    bad = [name for name, entry in data["stages"].items()
+           if not isinstance(entry.get("outs", []), list)
+           or not all(isinstance(o, dict) and isinstance(o.get("path"), str) for o in entry.get("outs", []))]
+    if bad:
+        raise InputError(f"{lock}: the outs of stage {bad[0]!r} are not a list of mappings with a path, as `dvc "
+                         f"repro` writes them")
     return data["stages"]
 
 
@@ -96,7 +102,16 @@ def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
     except DvcException as e:
         raise InputError(f"{root}: not a DVC project ({str(e).splitlines()[0]})") from None
     with contextlib.chdir(root), repo:  # DVC resolves some paths against the cwd
-        uncached = {(s.name, str(o.def_path)) for s in repo.index.stages for o in s.outs if not o.use_cache}
+        try:
+            index = repo.index.stages
+        except DvcException as e:  # dvc.yaml or dvc.lock that DVC's own schema refuses
+            raise InputError(f"{root}: DVC cannot read the pipeline ({str(e).splitlines()[0]})") from None
+        defined = {s.name for s in index}
+        if stages and not set(stages) <= defined:
+            raise InputError(f"{root / 'dvc.yaml'} defines no stage {sorted(set(stages) - defined)[0]!r} any more "
+                             f"(dvc.lock still names it: `dvc repro` rewrites it)")
+        names = [n for n in names if n in defined]  # dvc.lock may still name stages dvc.yaml dropped
+        uncached = {(s.name, str(o.def_path)) for s in index for o in s.outs if not o.use_cache}
         cached = [n for n in names if any(o.get("path") and (n, o["path"]) not in uncached
                                           for o in locked[n].get("outs", []))]
         if cached:
@@ -120,7 +135,11 @@ def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
                     if out.def_path not in wanted:
                         continue
                     if out.hash_info and out.cache.exists(out.hash_info.value) and not out.changed_cache():
-                        out.checkout()
+                        try:
+                            out.checkout()
+                        except DvcException as e:
+                            raise NotRestorable(f"{out.def_path}: DVC's copy could not be checked out "
+                                                f"({str(e).splitlines()[0]})") from None
                         done.copied.append(out.def_path)
                     else:
                         done.missing.append(out.def_path)

@@ -165,23 +165,39 @@ def test_a_failing_stage_s_outputs_come_back_and_a_newer_file_stays(smoke_projec
         curve.write_bytes(before[curve][curve.as_posix()])
 
 
-def test_restore_names_a_stage_dvc_lock_does_not_have(smoke_project):
-    """A stage that dvc.lock does not name is one line naming it, exit 2."""
+def test_restore_names_a_stage_dvc_lock_or_dvc_yaml_does_not_have(smoke_project, tmp_path):
+    """A stage that dvc.lock does not name is one line naming it, exit 2; so is one that dvc.lock names but
+    dvc.yaml no longer defines, and without a stage such a leftover of dvc.lock is passed over."""
     out = _restore(smoke_project.root, "no_such_stage", fails=True)
     assert out.count("\n") == 1 and "dvc.lock names no stage 'no_such_stage'" in out, out
+    dst = tmp_path / "p"
+    subprocess.run(["git", "init", "-q", str(dst)], check=True)
+    (dst / ".dvc").mkdir()
+    (dst / ".dvc/config").write_text("")
+    (dst / "dvc.yaml").write_text("stages: {}\n")
+    (dst / "dvc.lock").write_text("schema: '2.0'\nstages: {gone: {cmd: x, outs: [{path: a.txt, md5: '01'}]}}\n")
+    out = _restore(dst, "gone", fails=True)
+    assert out.count("\n") == 1 and "dvc.yaml defines no stage 'gone' any more" in out, out
+    assert _restore(dst).startswith("nothing to bring back")
 
 
 @pytest.mark.parametrize(("lock", "dvc_project", "says"), [
     (None, True, "dvc.lock: no such file"),
     ("stages: [1\n", True, "dvc.lock: not YAML"),
     ("schema: '2.0'\nstages: {a: 5}\n", True, "dvc.lock: stage 'a' is not a mapping"),
+    ("schema: '2.0'\nstages: {a: {cmd: x, outs: [5]}}\n", True, "dvc.lock: the outs of stage 'a' are not a list"),
+    ("schema: 2.0\nstages: {a: {cmd: x, outs: [{path: a.txt, md5: '01'}]}}\n", True,
+     ": DVC cannot read the pipeline ('./dvc.lock' validation failed"),
     ("schema: '2.0'\nstages: {}\n", False, ": not a DVC project"),
-], ids=["no-lock", "lock-not-yaml", "stage-not-a-mapping", "not-a-dvc-project"])
+], ids=["no-lock", "lock-not-yaml", "stage-not-a-mapping", "outs-not-mappings", "schema-dvc-refuses",
+        "not-a-dvc-project"])
 def test_restore_refuses_a_hostile_project_in_one_line(tmp_path, lock, dvc_project, says):
     """The README's restore command on a project it cannot read: one line naming the file or folder, exit 2."""
     if dvc_project:
+        subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
         (tmp_path / ".dvc").mkdir()
         (tmp_path / ".dvc/config").write_text("")
+        (tmp_path / "dvc.yaml").write_text("stages: {}\n")
     if lock is not None:
         (tmp_path / "dvc.lock").write_text(lock)
     proc = subprocess.run([sys.executable, "-m", "lfdt.restore", "--root", str(tmp_path)], capture_output=True,
