@@ -324,7 +324,7 @@ def issue37(root: Path) -> str:
     pushes further out across the box than the hand did, its distance to the hand, the open-loop replay of the
     labels, and F's error on two-arm pushes across the box and in yaw (a share of predicting no change)."""
     rows = [r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
-            if r["trial"].startswith(ISSUE37_PREFIX) and SEARCH_MARK not in r["trial"]]
+            if r["trial"].startswith(ISSUE37_PREFIX) and not _in_a_search(root, r["trial"])]
     lines = ["| trial | change | method | demos | success (worst seed) | path rule (worst seed) | path rule: vs BC "
              "w/o | replacing robot further out than the hand (cm) | replacing robot to the hand (cm) | replay of the "
              "labels solves | F on pushes: across / yaw |", "| --- |" + " --- |" * 10]
@@ -394,9 +394,11 @@ def load_test(root: Path) -> str:
     return "\n".join(lines)
 
 
-SEARCH_MARK = "-search-"
-"""What names a search's trials (``tools/dev_search.py``: ``<study>-t<n>``, its studies named ``i37-search-...``);
-they have a block of their own (:func:`search`)."""
+def _in_a_search(root: Path, trial: str) -> bool:
+    """Whether ``trial`` is one of a ``tools/dev_search.py`` study's (``<study>-t<n>``, the study having its
+    docs/experiments/search_<study>.csv): those have a block of their own (:func:`search`)."""
+    studies = [p.stem[len("search_"):] for p in (root / "docs" / "experiments").glob("search_*.csv")]
+    return any(re.fullmatch(rf"{re.escape(s)}-t\d+", trial) for s in studies)
 
 
 def search(root: Path) -> str:
@@ -418,21 +420,24 @@ def search(root: Path) -> str:
         out += [f"**{study}**", "", "| trial | " + " | ".join(k.split(".", 1)[1] for k in knobs) +
                 " | success (worst seed) | path rule (worst seed) | per seed | wall (min) |",
                 "| --- |" + " --- |" * (len(knobs) + 4)]
+        first_row = next((r for r in rows if r.get("baseline") == "True"), None) if "baseline" in rows[0] else \
+            next((r for r in rows if r["trial"] == "0"), None)
         for r in sorted(rows, key=lambda r: int(r["trial"])):
-            label = f"t{r['trial']}" + (" (params.yaml)" if r["trial"] == "0" else "")
+            label = f"t{r['trial']}" + (" (params.yaml)" if r is first_row else "")
             out.append(f"| {label} | " + " | ".join(r[k] for k in knobs) + f" | {r['success_pct']} % "
                        f"({r['worst_seed_pct']} %) | {r['path_success_pct']} % ({r['path_worst_seed_pct']} %) | "
                        f"{r['per_seed_pct']} | {r['wall_min']} |")
-        first = trials.get(f"{study}-t0")
+        b = first_row["trial"] if first_row else None
+        first = trials.get(f"{study}-t{b}") if b is not None else None
         best = max(rows, key=lambda r: (float(r["success_pct"]), -int(r["trial"])))
         demos = first["demos"] if first else ""
-        base = _outcome_rows(root, f"{study}-t0", "lfdt", demos)
+        base = _outcome_rows(root, f"{study}-t{b}", "lfdt", demos) if first else None
         top = _outcome_rows(root, f"{study}-t{best['trial']}", "lfdt", demos)
         line = f"Best of {len(rows)} trials: t{best['trial']}, {best['success_pct']} %"
-        if base is not None and top is not None and best["trial"] != "0" and sorted(base) == sorted(top):
+        if base is not None and top is not None and best is not first_row and sorted(base) == sorted(top):
             base, top = (np.array([r[s] for s in sorted(r)], dtype=float) for r in (base, top))
             lo, hi = paired_difference_interval(top, base)
-            line += (f"; against t0, paired over the same seeds and start states: "
+            line += (f"; against t{b} (params.yaml), paired over the same seeds and start states: "
                      f"{100 * (top - base).mean():+.1f} points (95 % interval {100 * lo:+.1f} to {100 * hi:+.1f}), "
                      f"an interval that does not allow for having picked the best of {len(rows)}")
         if first:

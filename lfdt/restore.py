@@ -8,12 +8,15 @@ back from that copy, by the hashes ``dvc.lock`` names, so results never committe
 no copy of the ``cache: false`` outputs of the four stages that also have plain ones (``fingerprint``, ``report``,
 ``register_policies``, ``twin_report``: DVC does not run-cache them): each such output that is missing is named, with
 the git command that brings back its last committed version.
-An output that is in the workspace is left as it is (it may be newer than ``dvc.lock``).
+A ``cache: false`` output that is in the workspace is left as it is (it may be newer than ``dvc.lock``); a cached one
+is checked out as ``dvc checkout`` does (files a failing stage half-wrote into it are refused by name, and replaced
+with ``--force``).
 
 Examples::
 
     python -m lfdt.restore                       # every stage of dvc.lock
-    python -m lfdt.restore summarize_experts report
+    python -m lfdt.restore collect_demos report
+    python -m lfdt.restore --force fit_dynamics  # also replace what the failing stage half-wrote into models/
 """
 
 from __future__ import annotations
@@ -44,6 +47,10 @@ class Restored:
     """``cache: false`` outputs absent from the workspace whose copy the cache does not hold."""
     stages: dict[str, str] = field(default_factory=dict)
     """The stage of each missing output."""
+    why: dict[str, str] = field(default_factory=dict)
+    """Why the cache holds no copy of each missing output."""
+    checkout_error: str = ""
+    """What ``dvc checkout`` refused, if it did (the ``cache: false`` outputs are still brought back)."""
 
 
 @contextlib.contextmanager
@@ -82,12 +89,19 @@ def _locked_stages(root: Path) -> dict[str, dict]:
     return data["stages"]
 
 
-def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
+def _message(e: Exception) -> str:
+    """DVC's whole message on one line (its first line alone can end in "the following targets:")."""
+    return " ".join(line.strip() for line in str(e).splitlines() if line.strip())
+
+
+def restore(root: str | Path, stages: list[str] | None = None, force: bool = False) -> Restored:
     """Bring back the outputs of ``stages`` (default: every stage of ``dvc.lock``) in the DVC project at ``root``:
-    the cached ones by ``dvc checkout``, the ``cache: false`` ones that are absent by copying them from the local
-    cache by their ``dvc.lock`` hash. Existing ``cache: false`` files are never overwritten."""
+    the cached ones by ``dvc checkout`` (``force``: as ``dvc checkout --force``, discarding what a failing stage
+    half-wrote into them), the ``cache: false`` ones that are absent by copying them from the local cache by their
+    ``dvc.lock`` hash. Existing ``cache: false`` files are never overwritten. Holds DVC's repository lock, so it never
+    writes into a stage that a `dvc repro` is running."""
     from dvc.exceptions import DvcException
-    from dvc.repo import Repo
+    from dvc.repo import Repo, lock_repo
 
     root = Path(root).resolve()
     locked = _locked_stages(root)
@@ -100,51 +114,62 @@ def restore(root: str | Path, stages: list[str] | None = None) -> Restored:
     try:
         repo = Repo(str(root))
     except DvcException as e:
-        raise InputError(f"{root}: not a DVC project ({str(e).splitlines()[0]})") from None
+        raise InputError(f"{root}: not a DVC project ({_message(e)})") from None
     with contextlib.chdir(root), repo:  # DVC resolves some paths against the cwd
         try:
-            index = repo.index.stages
-        except DvcException as e:  # dvc.yaml or dvc.lock that DVC's own schema refuses
-            raise InputError(f"{root}: DVC cannot read the pipeline ({str(e).splitlines()[0]})") from None
-        defined = {s.name for s in index}
-        if stages and not set(stages) <= defined:
-            raise InputError(f"{root / 'dvc.yaml'} defines no stage {sorted(set(stages) - defined)[0]!r} any more "
-                             f"(dvc.lock still names it: `dvc repro` rewrites it)")
-        names = [n for n in names if n in defined]  # dvc.lock may still name stages dvc.yaml dropped
-        uncached = {(s.name, str(o.def_path)) for s in index for o in s.outs if not o.use_cache}
-        cached = [n for n in names if any(o.get("path") and (n, o["path"]) not in uncached
-                                          for o in locked[n].get("outs", []))]
-        if cached:
-            try:
-                with _quiet_dvc():
-                    stats = repo.checkout(targets=cached)
-            except DvcException as e:  # e.g. a cached output changed in the workspace and not saved anywhere
-                raise NotRestorable(f"dvc checkout of {', '.join(cached[:3])}{', ...' if len(cached) > 3 else ''} "
-                                    f"in {root}: {str(e).splitlines()[0]}") from None
-            done.checked_out = sorted(str(p) for p in stats.get("added", []) + stats.get("modified", []))
-        cache = repo.stage_cache
-        for name in names:
-            entry = locked[name]
-            wanted = [o["path"] for o in entry.get("outs", []) if (name, o.get("path")) in uncached
-                      and not (root / o["path"]).exists()]
-            if not wanted or "cmd" not in entry:
-                continue
-            copy = cache._create_stage(entry)  # the run cache's own way back to its uncached outputs
-            with cache._cache_type_copy(), _quiet_dvc():
-                for out in copy.outs:
-                    if out.def_path not in wanted:
-                        continue
-                    if out.hash_info and out.cache.exists(out.hash_info.value) and not out.changed_cache():
-                        try:
-                            out.checkout()
-                        except DvcException as e:
-                            raise NotRestorable(f"{out.def_path}: DVC's copy could not be checked out "
-                                                f"({str(e).splitlines()[0]})") from None
-                        done.copied.append(out.def_path)
-                    else:
-                        done.missing.append(out.def_path)
-                        done.stages[out.def_path] = name
+            with lock_repo(repo):
+                _restore_locked(repo, root, locked, names, stages, force, done)
+        except DvcException as e:  # the lock held by a running `dvc repro`, a pipeline DVC's schema refuses
+            raise NotRestorable(f"{root}: {_message(e)}") from None
     return done
+
+
+def _restore_locked(repo, root: Path, locked: dict, names: list[str], stages: list[str] | None, force: bool,
+                    done: Restored) -> None:
+    from dvc.exceptions import DvcException
+
+    index = repo.index.stages
+    defined = {s.name for s in index}
+    if stages and not set(stages) <= defined:
+        raise InputError(f"{root / 'dvc.yaml'} defines no stage {sorted(set(stages) - defined)[0]!r} any more "
+                         f"(dvc.lock still names it: `dvc repro` rewrites it)")
+    names = [n for n in names if n in defined]  # dvc.lock may still name stages dvc.yaml dropped
+    uncached = {(s.name, str(o.def_path)) for s in index for o in s.outs if not o.use_cache}
+    kept = {s.name for s in index if all(o.use_cache or o.is_metric or o.is_plot for o in s.outs)}
+    cached = [n for n in names if any((n, o["path"]) not in uncached for o in locked[n].get("outs", []))]
+    if cached:
+        try:
+            with _quiet_dvc():
+                stats = repo.checkout(targets=cached, force=force)
+            done.checked_out = sorted(str(p) for p in stats.get("added", []) + stats.get("modified", []))
+        except DvcException as e:  # a failing stage's half-written files in a cached output, an object not cached
+            done.checkout_error = (f"dvc checkout of {', '.join(cached[:3])}{', ...' if len(cached) > 3 else ''}: "
+                                   f"{_message(e)}")
+    cache = repo.stage_cache
+    for name in names:
+        entry = locked[name]
+        wanted = [o["path"] for o in entry.get("outs", []) if (name, o["path"]) in uncached
+                  and not (root / o["path"]).exists()]
+        if not wanted or "cmd" not in entry:
+            continue
+        copy = cache._create_stage(entry)  # the run cache's own way back to its uncached outputs
+        with cache._cache_type_copy(), _quiet_dvc():
+            for out in copy.outs:
+                if out.def_path not in wanted:
+                    continue
+                if out.hash_info and out.cache.exists(out.hash_info.value) and not out.changed_cache():
+                    try:
+                        out.checkout()
+                    except DvcException as e:
+                        raise NotRestorable(f"{out.def_path}: DVC's copy could not be checked out "
+                                            f"({_message(e)})") from None
+                    done.copied.append(out.def_path)
+                else:
+                    done.missing.append(out.def_path)
+                    done.stages[out.def_path] = name
+                    done.why[out.def_path] = (
+                        "DVC's run cache holds none here (a fresh clone, `dvc gc`, `dvc repro --no-commit`)"
+                        if name in kept else "DVC keeps none for a stage with plain `cache: false` outputs")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -154,9 +179,11 @@ def main(argv: list[str] | None = None) -> int:
                                 epilog=__doc__.split("\n\n", 1)[1])
     p.add_argument("stages", nargs="*", help="stages as dvc.lock names them (e.g. train_bc@lfdt-50); default all")
     p.add_argument("--root", default=".", help="the DVC project (default the current folder)")
+    p.add_argument("--force", action="store_true",
+                   help="as `dvc checkout --force`: replace what a failing stage half-wrote into a cached output")
     args = p.parse_args(argv)
     try:
-        done = restore(args.root, args.stages)
+        done = restore(args.root, args.stages, force=args.force)
     except StageError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -164,13 +191,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"checked out  {path}")
     for path in done.copied:
         print(f"copied back  {path}  (cache: false; the run cache's copy)")
+    if done.checkout_error:
+        hint = "" if args.force else " (what a failing stage half-wrote: `python -m lfdt.restore --force` replaces it)"
+        print(f"error: {done.checkout_error}{hint}", file=sys.stderr)
     for path in done.missing:
         print(f"error: {path}: not in the workspace, and DVC's cache holds no copy of the version dvc.lock names "
-              f"(DVC keeps none for a stage with plain `cache: false` outputs): `git checkout -- {path}` brings back "
-              f"its last committed version, `dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
-    if not (done.checked_out or done.copied or done.missing):
+              f"({done.why[path]}): `git checkout -- {path}` brings back its last committed version, "
+              f"`dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
+    if not (done.checked_out or done.copied or done.missing or done.checkout_error):
         print("nothing to bring back: every output that dvc.lock names is in the workspace")
-    return 2 if done.missing else 0
+    return 2 if done.missing or done.checkout_error else 0
 
 
 if __name__ == "__main__":

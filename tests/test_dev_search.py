@@ -82,3 +82,21 @@ def test_no_trial_starts_once_the_budget_is_spent(dev_search, tmp_path, capsys):
     calls = []
     _run(dev_search, tmp_path, _fake(calls), budget_min=-1.0)
     assert not calls and "budget of -1.0 min spent after 0 trials" in capsys.readouterr().err
+
+
+def test_a_failed_baseline_is_run_again_and_the_settings_cannot_change(dev_search, tmp_path):
+    """Ctrl-C in trial 0: the rerun measures the baseline again (trial 1 here), and the table says which row it
+    is; going on with other settings (here another objective) is refused by name, before any trial."""
+    calls = []
+    with pytest.raises(KeyboardInterrupt):
+        _run(dev_search, tmp_path, _fake(calls, stop_at=0))
+    again = []
+    _run(dev_search, tmp_path, _fake(again), trials=2)
+    assert again[0] == (1, BASELINE, True) and not again[1][2]
+    rows = _table(tmp_path)
+    assert [(r["trial"], r["baseline"]) for r in rows] == [("1", "True"), ("2", "False")]
+    more = []
+    with pytest.raises(SystemExit, match="ran with objective = 'success_pct', this run asks for 'path'"):
+        dev_search.run_study("s", f"sqlite:///{tmp_path / 's.db'}", _fake(more), BASELINE, 4, 60.0, 0,
+                             tmp_path / "search_s.csv", {"objective": "path"})
+    assert not more

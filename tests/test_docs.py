@@ -49,3 +49,8 @@ def test_a_search_block_pairs_its_best_trial_with_its_baseline(tmp_path: Path):
     assert "| t0 (params.yaml) | 10.0 | 0.0 | 37.5 % (25.0 %) |" in block, block
     assert "Best of 2 trials: t1, 62.5 %" in block and "+25.0 points" in block, block
     assert "development seeds 40 41" in block and "Some CPU (pinned), 2026-12-06 to 2026-12-06" in block, block
+    table = (exp / "search_st-search-x.csv").read_text().splitlines()
+    (exp / "search_st-search-x.csv").write_text("\n".join(
+        [table[0].replace("trial,", "trial,baseline,", 1)] +
+        [line.replace(",", f",{line.startswith('0,')},", 1) for line in table[1:]]) + "\n")
+    assert docs.search(tmp_path) == block  # the table's baseline column (tools/dev_search.py) names the same row

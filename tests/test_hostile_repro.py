@@ -140,10 +140,11 @@ def test_what_dvc_removes_comes_back_by_the_readme_command(smoke_project):
 
 def test_a_failing_stage_s_outputs_come_back_and_a_newer_file_stays(smoke_project):
     """A real failure: `dvc repro -f -s fit_dynamics` with a tracking server that does not answer stops with a named
-    error after DVC removed the stage's outputs (its models, a folder DVC caches; its curve, a ``cache: false`` plot);
-    the README's command brings each back byte for byte (the curve was never committed to git), DVC sees the stage
-    up to date, and a second call finds nothing to do. A ``cache: false`` file that is in the workspace is never
-    overwritten (it may be newer than dvc.lock)."""
+    error after DVC removed the stage's outputs (its models, a folder DVC caches; its curve, a ``cache: false`` plot).
+    With a file half-written into the models folder (a stage that fails partway), the README's command brings the
+    curve back, names that file and ``--force`` (exit 2) and leaves it; with ``--force`` everything is back byte for
+    byte (the curve was never committed to git), DVC sees the stage up to date, and a second call finds nothing.
+    A ``cache: false`` file that is in the workspace is never overwritten (it may be newer than dvc.lock)."""
     dst = smoke_project.root
     models, curve = dst / "models/dynamics", dst / "reports/dynamics_curve.csv"
     before = {p: _files(p) for p in (models, curve)}
@@ -152,9 +153,15 @@ def test_a_failing_stage_s_outputs_come_back_and_a_newer_file_stays(smoke_projec
     assert "error:" in failed and "127.0.0.1:9" in failed, failed[-2000:]
     assert not models.exists() and not curve.exists(), "DVC kept the outputs of the failing stage: this test shows " \
                                                        "nothing"
-    out = _restore(dst, "fit_dynamics")
+    half = models / "half-written.pt"  # what a stage that fails partway through leaves in a cached output
+    half.parent.mkdir(parents=True, exist_ok=True)
+    half.write_bytes(b"partial")
+    out = _restore(dst, "fit_dynamics", fails=True)
+    assert "copied back  reports/dynamics_curve.csv" in out and _files(curve) == before[curve], out
+    assert "half-written.pt" in out and "`python -m lfdt.restore --force`" in out, out
+    assert half.exists(), "restore without --force removed a file it was not asked to"
+    out = _restore(dst, "--force", "fit_dynamics")
     assert {p: _files(p) for p in (models, curve)} == before, out
-    assert "copied back  reports/dynamics_curve.csv" in out, out
     assert "up to date" in smoke.dvc(["status", "fit_dynamics"], dst)
     assert _restore(dst, "fit_dynamics").startswith("nothing to bring back"), "a second call did something"
     curve.write_text("newer than dvc.lock\n")

@@ -18,6 +18,7 @@ import lfdt.numerics  # noqa: F401
 import argparse
 import csv
 import json
+import re
 import subprocess
 import sys
 import time
@@ -68,15 +69,24 @@ def run_study(name: str, storage: str, run_trial: Callable[[int, dict, bool], di
     """Run (or go on with) the study ``name`` in ``storage`` until it has ``trials`` finished trials or
     ``budget_min`` minutes have passed (checked before each trial). ``run_trial(number, values, is_baseline)``
     runs one trial and returns its row (:data:`OBJECTIVE` and :data:`RECORDED`); ``baseline`` is trial 0's values.
-    A trial left running by a stopped run is marked failed; ``table`` is rewritten after every trial."""
+    A trial left running by a stopped run is marked failed; ``table`` is rewritten after every trial. A study goes on
+    only with the settings (``attrs``: objective, space, seeds, demos) it started with; the baseline is queued again
+    while it has not finished."""
     sampler = optuna.samplers.TPESampler(seed=sampler_seed, n_startup_trials=5)
     study = optuna.create_study(study_name=name, storage=storage, direction="maximize", sampler=sampler,
                                 load_if_exists=True)
-    for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
-        study.tell(t.number, state=optuna.trial.TrialState.FAIL)  # a trial the last run was stopped in
+    state = optuna.trial.TrialState
+    for t in study.get_trials(deepcopy=False, states=(state.RUNNING,)):
+        study.tell(t.number, state=state.FAIL)  # a trial the last run was stopped in
     if not study.trials:
         for k, v in attrs.items():
             study.set_user_attr(k, v)
+    changed = {k: (study.user_attrs.get(k), v) for k, v in attrs.items() if study.user_attrs.get(k) != v}
+    if changed:
+        k, (old, new) = next(iter(changed.items()))
+        raise SystemExit(f"dev_search: study {name!r} in {storage} ran with {k} = {old!r}, this run asks for {new!r}: "
+                         f"a study's trials must be comparable (name a new study)")
+    if not any(t.user_attrs.get("baseline") and t.state in (state.COMPLETE, state.WAITING) for t in study.trials):
         study.enqueue_trial(baseline, user_attrs={"baseline": True})
     t0 = time.monotonic()
     while True:
@@ -90,12 +100,13 @@ def run_study(name: str, storage: str, run_trial: Callable[[int, dict, bool], di
         values = {k: trial.suggest_categorical(k, v) for k, v in SPACE.items()}
         try:
             row = run_trial(trial.number, values, bool(trial.user_attrs.get("baseline")))
+            value = float(row[OBJECTIVE])
+            for k in RECORDED:
+                trial.set_user_attr(k, row[k])
         except BaseException:
-            study.tell(trial, state=optuna.trial.TrialState.FAIL)
+            study.tell(trial, state=state.FAIL)
             raise
-        for k in RECORDED:
-            trial.set_user_attr(k, row[k])
-        study.tell(trial, float(row[OBJECTIVE]))
+        study.tell(trial, value)
         _write_table(study, table)
     _write_table(study, table)
     return study
@@ -112,12 +123,21 @@ def main() -> None:
     ap.add_argument("--budget-min", type=float, default=70.0, help="start no trial after this many minutes")
     ap.add_argument("--sampler-seed", type=int, default=0, help="the TPE sampler's seed")
     args = ap.parse_args()
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", args.study):
+        raise SystemExit(f"dev_search: --study {args.study!r}: letters, digits, '_', '.' and '-' only (it names files)")
     unknown = [k for k in SPACE if _current(k) not in SPACE[k]]
     if unknown:
         raise SystemExit(f"params.yaml's {unknown[0]} = {_current(unknown[0])!r} is not among the searched values "
                          f"{SPACE[unknown[0]]}: the baseline trial must be a point of the space")
     folder = ROOT / "dev" / "search"
     folder.mkdir(parents=True, exist_ok=True)
+    db, table = folder / f"{args.study}.db", ROOT / "docs" / "experiments" / f"search_{args.study}.csv"
+    with TRIALS.open(newline="") as f:
+        earlier = [r["trial"] for r in csv.DictReader(f) if r["trial"].startswith(f"{args.study}-t")]
+    if not db.exists() and (table.exists() or earlier):
+        found = table.name if table.exists() else earlier[0]
+        raise SystemExit(f"dev_search: study {args.study!r} has results in docs/experiments ({found}) but no {db}: "
+                         f"its trials would be overwritten (name a new study)")
 
     def run_trial(number: int, values: dict, is_baseline: bool) -> dict:
         name = f"{args.study}-t{number}"
@@ -125,7 +145,7 @@ def main() -> None:
         hypothesis = (f"search {args.study}, trial {number} "
                       f"({'baseline: params.yaml' if is_baseline else 'TPE proposal'}); "
                       f"objective fixed before the study: LfDT mean success (end state), {args.demos} demos, "
-                      f"development seeds {args.seeds[0]}-{args.seeds[-1]}")
+                      f"development seeds {' '.join(map(str, args.seeds))}")
         cmd = [sys.executable, str(ROOT / "tools/dev_trial.py"), "--name", name, "--demos", str(args.demos),
                "--methods", "lfdt", "--seeds", *map(str, args.seeds), "--hypothesis", hypothesis]
         for c in changes:
@@ -134,12 +154,17 @@ def main() -> None:
         proc = subprocess.run(cmd, cwd=ROOT)
         if proc.returncode != 0:
             raise SystemExit(f"dev_search: trial {number} ({name}) failed with exit code {proc.returncode}")
-        return _row(name, args.demos)
+        try:
+            return _row(name, args.demos)
+        except RuntimeError as e:
+            raise SystemExit(f"dev_search: {e}") from None
 
-    study = run_study(args.study, f"sqlite:///{(folder / f'{args.study}.db').resolve()}", run_trial,
-                      {k: _current(k) for k in SPACE}, args.trials, args.budget_min, args.sampler_seed,
-                      ROOT / "docs" / "experiments" / f"search_{args.study}.csv",
+    study = run_study(args.study, f"sqlite:///{db.resolve()}", run_trial, {k: _current(k) for k in SPACE},
+                      args.trials, args.budget_min, args.sampler_seed, table,
                       {"objective": OBJECTIVE, "space": json.dumps(SPACE), "seeds": args.seeds, "demos": args.demos})
+    if not any(t.state == optuna.trial.TrialState.COMPLETE for t in study.trials):
+        print(f"dev_search: study {args.study!r} has no finished trial", file=sys.stderr)
+        return
     best = study.best_trial
     print(f"dev_search: best of {len(study.trials)} trials: t{best.number} {best.value:.1f} % "
           f"({json.dumps(best.params)})", file=sys.stderr)
@@ -148,13 +173,14 @@ def main() -> None:
 def _write_table(study, path: Path) -> None:
     """Every finished trial of the study, one row each, written whole (a crash keeps the last table)."""
     rows = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
-    fields = ["trial", *SPACE, *RECORDED]
+    fields = ["trial", "baseline", *SPACE, *RECORDED]
     tmp = path.with_suffix(".csv.tmp")
     with tmp.open("w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(fields)
         for t in rows:
-            w.writerow([t.number, *(t.params[k] for k in SPACE), *(t.user_attrs.get(k, "") for k in RECORDED)])
+            w.writerow([t.number, bool(t.user_attrs.get("baseline")), *(t.params[k] for k in SPACE),
+                        *(t.user_attrs.get(k, "") for k in RECORDED)])
     tmp.replace(path)
 
 
