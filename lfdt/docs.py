@@ -423,23 +423,25 @@ def search(root: Path) -> str:
         first_row = next((r for r in rows if r.get("baseline") == "True"), None) if "baseline" in rows[0] else \
             next((r for r in rows if r["trial"] == "0"), None)
         for r in sorted(rows, key=lambda r: int(r["trial"])):
-            label = f"t{r['trial']}" + (" (params.yaml)" if r is first_row else "")
+            label = f"t{r['trial']}" + (" (params.yaml)" if r is first_row else "") + \
+                (f" (= t{r['repeat_of']}, not run again)" if r.get("repeat_of") else "")
             out.append(f"| {label} | " + " | ".join(r[k] for k in knobs) + f" | {r['success_pct']} % "
                        f"({r['worst_seed_pct']} %) | {r['path_success_pct']} % ({r['path_worst_seed_pct']} %) | "
                        f"{r['per_seed_pct']} | {r['wall_min']} |")
         b = first_row["trial"] if first_row else None
         first = trials.get(f"{study}-t{b}") if b is not None else None
-        best = max(rows, key=lambda r: (float(r["success_pct"]), -int(r["trial"])))
+        run = [r for r in rows if not r.get("repeat_of")]
+        best = max(run, key=lambda r: (float(r["success_pct"]), -int(r["trial"])))
         demos = first["demos"] if first else ""
         base = _outcome_rows(root, f"{study}-t{b}", "lfdt", demos) if first else None
         top = _outcome_rows(root, f"{study}-t{best['trial']}", "lfdt", demos)
-        line = f"Best of {len(rows)} trials: t{best['trial']}, {best['success_pct']} %"
+        line = f"Best of {len(run)} trials: t{best['trial']}, {best['success_pct']} %"
         if base is not None and top is not None and best is not first_row and sorted(base) == sorted(top):
             base, top = (np.array([r[s] for s in sorted(r)], dtype=float) for r in (base, top))
             lo, hi = paired_difference_interval(top, base)
             line += (f"; against t{b} (params.yaml), paired over the same seeds and start states: "
                      f"{100 * (top - base).mean():+.1f} points (95 % interval {100 * lo:+.1f} to {100 * hi:+.1f}), "
-                     f"an interval that does not allow for having picked the best of {len(rows)}")
+                     f"an interval that does not allow for having picked the best of {len(run)}")
         if first:
             names = [f"{study}-t{r['trial']}" for r in rows]
             dates = sorted({trials[n]["date"] for n in names if n in trials})

@@ -90,8 +90,12 @@ def _locked_stages(root: Path) -> dict[str, dict]:
 
 
 def _message(e: Exception) -> str:
-    """DVC's whole message on one line (its first line alone can end in "the following targets:")."""
-    return " ".join(line.strip() for line in str(e).splitlines() if line.strip())
+    """DVC's whole message on one line (its first line alone can end in "the following targets:"), with the keys and
+    reasons of a schema's refusal (DVC's own message only counts them)."""
+    text = " ".join(line.strip() for line in str(e).splitlines() if line.strip())
+    errors = getattr(getattr(e, "exc", None), "errors", None) or []
+    where = [f"{'.'.join(map(str, getattr(x, 'path', [])))}: {getattr(x, 'msg', x)}" for x in errors[:4]]
+    return text + (f" ({'; '.join(where)}{'; ...' if len(errors) > 4 else ''})" if where else "")
 
 
 def restore(root: str | Path, stages: list[str] | None = None, force: bool = False) -> Restored:
@@ -101,6 +105,7 @@ def restore(root: str | Path, stages: list[str] | None = None, force: bool = Fal
     ``dvc.lock`` hash. Existing ``cache: false`` files are never overwritten. Holds DVC's repository lock, so it never
     writes into a stage that a `dvc repro` is running."""
     from dvc.exceptions import DvcException
+    from dvc.lock import LockError
     from dvc.repo import Repo, lock_repo
 
     root = Path(root).resolve()
@@ -119,8 +124,10 @@ def restore(root: str | Path, stages: list[str] | None = None, force: bool = Fal
         try:
             with lock_repo(repo):
                 _restore_locked(repo, root, locked, names, stages, force, done)
-        except DvcException as e:  # the lock held by a running `dvc repro`, a pipeline DVC's schema refuses
+        except LockError as e:  # a running `dvc repro`
             raise NotRestorable(f"{root}: {_message(e)}") from None
+        except DvcException as e:  # a dvc.yaml or dvc.lock DVC's schema refuses
+            raise NotRestorable(f"{root}: DVC cannot read the pipeline ({_message(e)})") from None
     return done
 
 

@@ -58,8 +58,8 @@ def test_the_baseline_runs_first_and_every_trial_is_a_row(dev_search, tmp_path):
 
 def test_a_stopped_study_goes_on_where_it_stopped(dev_search, tmp_path):
     """Ctrl-C inside trial 2: trials 0 and 1 stay in the table, trial 2 is marked failed; the rerun asks no
-    baseline again, runs new trials until four are finished, and a trial that a killed run left running (no
-    chance to mark it) is marked failed too."""
+    baseline again, runs new trials until four are finished (a point measured before is not run again), and a
+    trial that a killed run left running (no chance to mark it) is marked failed too."""
     import optuna
 
     calls = []
@@ -73,9 +73,11 @@ def test_a_stopped_study_goes_on_where_it_stopped(dev_search, tmp_path):
     study = _run(dev_search, tmp_path, _fake(again))
     states = [t.state for t in study.trials]
     assert optuna.trial.TrialState.RUNNING not in states
-    assert states.count(optuna.trial.TrialState.COMPLETE) == 4 and states.count(optuna.trial.TrialState.FAIL) == 2
-    assert [n for n, _, _ in again] == [4, 5] and not any(b for _, _, b in again)
-    assert [r["trial"] for r in _table(tmp_path)] == ["0", "1", "4", "5"]
+    run = [t.number for t in study.trials
+           if t.state == optuna.trial.TrialState.COMPLETE and "repeat_of" not in t.user_attrs]
+    assert len(run) == 4 and states.count(optuna.trial.TrialState.FAIL) == 2
+    assert [n for n, _, _ in again] == run[2:] and run[2] >= 4 and not any(b for _, _, b in again)
+    assert [r["trial"] for r in _table(tmp_path) if not r["repeat_of"]] == [str(n) for n in run]
 
 
 def test_no_trial_starts_once_the_budget_is_spent(dev_search, tmp_path, capsys):
@@ -100,3 +102,23 @@ def test_a_failed_baseline_is_run_again_and_the_settings_cannot_change(dev_searc
         dev_search.run_study("s", f"sqlite:///{tmp_path / 's.db'}", _fake(more), BASELINE, 4, 60.0, 0,
                              tmp_path / "search_s.csv", {"objective": "path"})
     assert not more
+
+
+def test_a_point_proposed_again_is_not_run_again(dev_search, tmp_path, monkeypatch, capsys):
+    """A space of two points: each runs once; the sampler's repeats are told the earlier value without running, do
+    not count as trials, and the study stops once the sampler keeps proposing what it measured."""
+    monkeypatch.setattr(dev_search, "SPACE", {"translator.lambda_side": [0.0, 10.0]})
+    calls = []
+
+    def run_trial(number, values, is_baseline):
+        return _fake(calls)(number, {**BASELINE, **values}, is_baseline)
+
+    study = dev_search.run_study("s", f"sqlite:///{tmp_path / 's.db'}", run_trial,
+                                 {"translator.lambda_side": 0.0}, 5, 60.0, 0, tmp_path / "search_s.csv", {})
+    assert sorted(v["translator.lambda_side"] for _, v, _ in calls) == [0.0, 10.0]
+    assert "proposed 50 points already measured" in capsys.readouterr().err
+    repeats = [t for t in study.trials if "repeat_of" in t.user_attrs]
+    assert len(repeats) == dev_search.MAX_REPEATS
+    assert all(t.value == study.trials[t.user_attrs["repeat_of"]].value for t in repeats)
+    rows = _table(tmp_path)
+    assert sum(1 for r in rows if not r["repeat_of"]) == 2

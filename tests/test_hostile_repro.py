@@ -182,7 +182,8 @@ def test_restore_names_a_stage_dvc_lock_or_dvc_yaml_does_not_have(smoke_project,
     (dst / ".dvc").mkdir()
     (dst / ".dvc/config").write_text("")
     (dst / "dvc.yaml").write_text("stages: {}\n")
-    (dst / "dvc.lock").write_text("schema: '2.0'\nstages: {gone: {cmd: x, outs: [{path: a.txt, md5: '01'}]}}\n")
+    (dst / "dvc.lock").write_text("schema: '2.0'\nstages: {gone: {cmd: x, outs: [{path: a.txt, hash: md5, "
+                                  "md5: 0123456789abcdef0123456789abcdef, size: 3}]}}\n")  # as `dvc repro` writes it
     out = _restore(dst, "gone", fails=True)
     assert out.count("\n") == 1 and "dvc.yaml defines no stage 'gone' any more" in out, out
     assert _restore(dst).startswith("nothing to bring back")
@@ -194,7 +195,8 @@ def test_restore_names_a_stage_dvc_lock_or_dvc_yaml_does_not_have(smoke_project,
     ("schema: '2.0'\nstages: {a: 5}\n", True, "dvc.lock: stage 'a' is not a mapping"),
     ("schema: '2.0'\nstages: {a: {cmd: x, outs: [5]}}\n", True, "dvc.lock: the outs of stage 'a' are not a list"),
     ("schema: 2.0\nstages: {a: {cmd: x, outs: [{path: a.txt, md5: '01'}]}}\n", True,
-     ": DVC cannot read the pipeline ('./dvc.lock' validation failed"),
+     ": DVC cannot read the pipeline ('./dvc.lock' validation failed: 2 errors (schema: invalid schema version; "
+     "stages.a.outs.0.md5: not a valid value))"),
     ("schema: '2.0'\nstages: {}\n", False, ": not a DVC project"),
 ], ids=["no-lock", "lock-not-yaml", "stage-not-a-mapping", "outs-not-mappings", "schema-dvc-refuses",
         "not-a-dvc-project"])
@@ -212,3 +214,21 @@ def test_restore_refuses_a_hostile_project_in_one_line(tmp_path, lock, dvc_proje
     assert proc.returncode == 2 and not proc.stdout, proc.stdout + proc.stderr
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ") and says in proc.stderr, proc.stderr
     assert str(tmp_path) in proc.stderr, proc.stderr
+
+
+def test_restore_waits_for_no_running_repro(tmp_path):
+    """While a `dvc repro` holds DVC's repository lock, restore writes nothing: one line naming the folder and the
+    lock, exit 2."""
+    from dvc.repo import Repo, lock_repo
+
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    (tmp_path / ".dvc").mkdir()
+    (tmp_path / ".dvc/config").write_text("")
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    (tmp_path / "dvc.lock").write_text("schema: '2.0'\nstages: {}\n")
+    with Repo(str(tmp_path)) as repo, lock_repo(repo):
+        proc = subprocess.run([sys.executable, "-m", "lfdt.restore", "--root", str(tmp_path)], capture_output=True,
+                              text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2 and not proc.stdout, proc.stdout + proc.stderr
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith(f"error: {tmp_path}: Unable to acquire lock"), \
+        proc.stderr

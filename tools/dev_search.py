@@ -44,6 +44,9 @@ OBJECTIVE = "success_pct"
 """What a trial maximises: LfDT's mean success (end-state rule) over the development seeds and start states, the
 column of docs/experiments/trials.csv; the worst seed and the path rule are recorded beside it, not optimised."""
 
+MAX_REPEATS = 50
+"""A study stops after the sampler proposed this many points already measured (a small space runs out)."""
+
 RECORDED = ("success_pct", "worst_seed_pct", "per_seed_pct", "path_success_pct", "path_worst_seed_pct", "wall_min")
 """The columns of a trial's row of trials.csv copied into the study's table."""
 
@@ -71,7 +74,8 @@ def run_study(name: str, storage: str, run_trial: Callable[[int, dict, bool], di
     runs one trial and returns its row (:data:`OBJECTIVE` and :data:`RECORDED`); ``baseline`` is trial 0's values.
     A trial left running by a stopped run is marked failed; ``table`` is rewritten after every trial. A study goes on
     only with the settings (``attrs``: objective, space, seeds, demos) it started with; the baseline is queued again
-    while it has not finished."""
+    while it has not finished. A point the sampler proposes again is not run again (the trials are deterministic:
+    the same params give the same bits): it is told the earlier trial's value and does not count as a trial."""
     sampler = optuna.samplers.TPESampler(seed=sampler_seed, n_startup_trials=5)
     study = optuna.create_study(study_name=name, storage=storage, direction="maximize", sampler=sampler,
                                 load_if_exists=True)
@@ -89,15 +93,27 @@ def run_study(name: str, storage: str, run_trial: Callable[[int, dict, bool], di
     if not any(t.user_attrs.get("baseline") and t.state in (state.COMPLETE, state.WAITING) for t in study.trials):
         study.enqueue_trial(baseline, user_attrs={"baseline": True})
     t0 = time.monotonic()
+    repeats = 0
     while True:
-        done = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+        done = [t for t in study.trials if t.state == state.COMPLETE and "repeat_of" not in t.user_attrs]
         if len(done) >= trials:
+            break
+        if repeats >= MAX_REPEATS:
+            print(f"dev_search: the sampler proposed {repeats} points already measured; stopping", file=sys.stderr)
             break
         if (time.monotonic() - t0) / 60 > budget_min:
             print(f"dev_search: budget of {budget_min} min spent after {len(done)} trials", file=sys.stderr)
             break
         trial = study.ask()
         values = {k: trial.suggest_categorical(k, v) for k, v in SPACE.items()}
+        same = next((t for t in done if t.params == values), None)
+        if same is not None:  # the trials are deterministic: a point measured before is not run again
+            repeats += 1
+            trial.set_user_attr("repeat_of", same.number)
+            for k in RECORDED:
+                trial.set_user_attr(k, same.user_attrs.get(k, ""))
+            study.tell(trial, same.value)
+            continue
         try:
             row = run_trial(trial.number, values, bool(trial.user_attrs.get("baseline")))
             value = float(row[OBJECTIVE])
@@ -173,13 +189,14 @@ def main() -> None:
 def _write_table(study, path: Path) -> None:
     """Every finished trial of the study, one row each, written whole (a crash keeps the last table)."""
     rows = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
-    fields = ["trial", "baseline", *SPACE, *RECORDED]
+    fields = ["trial", "baseline", "repeat_of", *SPACE, *RECORDED]
     tmp = path.with_suffix(".csv.tmp")
     with tmp.open("w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(fields)
         for t in rows:
-            w.writerow([t.number, bool(t.user_attrs.get("baseline")), *(t.params[k] for k in SPACE),
+            w.writerow([t.number, bool(t.user_attrs.get("baseline")), t.user_attrs.get("repeat_of", ""),
+                        *(t.params[k] for k in SPACE),
                         *(t.user_attrs.get(k, "") for k in RECORDED)])
     tmp.replace(path)
 
