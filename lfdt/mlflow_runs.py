@@ -258,6 +258,31 @@ def _retry(fn, attempts: int = 8):
     return None
 
 
+def _first_query(uri: str, name: str):
+    """An MLflow client of ``uri`` and the experiment ``name`` (None if missing): the store's first real query, whose
+    failure (a server that answers /health but fails its API, a database that refuses the login) is one line."""
+    import mlflow
+
+    mlflow.set_tracking_uri(uri)
+    try:
+        client = mlflow.MlflowClient()  # opens a database store (its schema checked, migrated)
+        with bounded_http():  # a server that fails every request: one line within seconds, not minutes
+            return client, client.get_experiment_by_name(name)
+    except Exception as err:  # noqa: BLE001 - any failure of the first query means the store is unusable
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise TrackingUnavailable(f"the MLflow tracking store MLFLOW_TRACKING_URI={redact(uri)} cannot be read "
+                                  f"({type(err).__name__}: {first})") from err
+
+
+def check_store_answers(uri: str) -> None:
+    """Preflight's check of a tracking server or database server: it answers a read-only query (the experiment's
+    lookup), not only /health or a TCP connection. An SQLite file is checked whole by :func:`check_tracking_uri`
+    (``thorough``) instead; nothing is created."""
+    base = uri.split("://", 1)[0].lower().split("+")[0] if "://" in uri else ""
+    if base in ("http", "https") or base in DB_SCHEMES:
+        _first_query(uri, experiment_name())
+
+
 def experiment_id(name: str | None = None) -> str:
     """Id of the experiment ``name`` (default ``$LFDT_MLFLOW_EXPERIMENT`` or 'lfdt'), created if missing."""
     import mlflow
@@ -270,14 +295,7 @@ def experiment_id(name: str | None = None) -> str:
     lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
-        try:
-            client = mlflow.MlflowClient()  # opens a database store (its schema checked, migrated)
-            with bounded_http():  # a server that fails every request: one line within seconds, not minutes
-                exp = client.get_experiment_by_name(name)
-        except Exception as err:  # noqa: BLE001 - any failure of the first query means the store is unusable
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-            raise TrackingUnavailable(f"the MLflow tracking store MLFLOW_TRACKING_URI={redact(uri)} cannot be read "
-                                      f"({type(err).__name__}: {first})") from err
+        client, exp = _first_query(uri, name)
         if exp is None:
             # a local store keeps artifacts beside the database, whatever directory a stage runs from
             artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None

@@ -15,7 +15,7 @@ import sys
 from dataclasses import dataclass
 
 from lfdt import mlflow_runs
-from lfdt.errors import StageError
+from lfdt.errors import one_line_errors
 
 SHARED_VIEW_TAG = "mlflow.sharedViewState."
 """Prefix of the experiment tags MLflow's UI reads a shared runs-table view from (MLflow 3)."""
@@ -132,15 +132,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ui", default="http://127.0.0.1:5000", help="where the MLflow UI is (for the printed URLs)")
     args = ap.parse_args(argv)
-    try:
-        exp_id, urls = install()
-    except StageError as err:  # the store or LFDT_MLFLOW_EXPERIMENT: one line naming it, as a stage says it
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    # the store or LFDT_MLFLOW_EXPERIMENT: one line naming it, as a stage says it
+    return one_line_errors(lambda: _report(*install(), args.ui), "the views already saved stay; rerun to add the rest")
+
+
+def _report(exp_id: str, urls: dict, ui: str) -> int:
     print(f"MLflow views in {mlflow_runs.tracking_uri()}:")
-    print(f"  the experiment's runs\n    {args.ui.rstrip('/')}/#/experiments/{exp_id}?{ML_WORKFLOW}")
+    print(f"  the experiment's runs\n    {ui.rstrip('/')}/#/experiments/{exp_id}?{ML_WORKFLOW}")
     for frag, (view, _) in urls.items():
-        print(f"  {view.title}\n    {args.ui.rstrip('/')}/{frag}")
+        print(f"  {view.title}\n    {ui.rstrip('/')}/{frag}")
     return 0
 
 

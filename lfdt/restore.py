@@ -28,7 +28,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lfdt.errors import InputError, StageError
+from lfdt.errors import InputError, StageError, one_line_errors
 
 
 class NotRestorable(StageError):
@@ -189,17 +189,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true",
                    help="as `dvc checkout --force`: replace what a failing stage half-wrote into a cached output")
     args = p.parse_args(argv)
-    try:
-        done = restore(args.root, args.stages, force=args.force)
-    except StageError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    return one_line_errors(lambda: _report(restore(args.root, args.stages, force=args.force), args.force),
+                           "what was brought back stays; the same command brings back the rest")
+
+
+def _report(done: Restored, force: bool) -> int:
     for path in done.checked_out:
         print(f"checked out  {path}")
     for path in done.copied:
         print(f"copied back  {path}  (cache: false; the run cache's copy)")
     if done.checkout_error:
-        hint = "" if args.force else " (what a failing stage half-wrote: `python -m lfdt.restore --force` replaces it)"
+        hint = "" if force else " (what a failing stage half-wrote: `python -m lfdt.restore --force` replaces it)"
         print(f"error: {done.checkout_error}{hint}", file=sys.stderr)
     for path in done.missing:
         print(f"error: {path}: not in the workspace, and DVC's cache holds no copy of the version dvc.lock names "

@@ -15,7 +15,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from lfdt import mlflow_runs
+from lfdt import errors, mlflow_runs
 from lfdt.config import Params, ParamsError, load_params
 from lfdt.errors import StageError
 from lfdt.files import write_atomic
@@ -34,7 +34,7 @@ def describe_os_error(err: OSError) -> str:
     return f"{files}: {err.strerror or err}"
 
 
-INTERRUPTED = 130
+INTERRUPTED = errors.INTERRUPTED
 """Exit code of a stage stopped by Ctrl-C (128 + SIGINT), as a shell reports it."""
 
 

@@ -1,9 +1,9 @@
 """DVC stage: check what every later stage reads from outside the data, before `dvc repro` runs (and so removes the
 outputs of) any of them: params.yaml is valid and complete, what a stage would refuse in valid params
-(:func:`check_runnable`: the torch device), and the tracking store (MLFLOW_TRACKING_URI, or the
-workspace's mlflow.db) can be used. A problem is one line and exit 2 while every earlier output is still in place.
-DVC runs it when params.yaml or its code changes (and with -f); it tracks no environment variable, so a new
-MLFLOW_TRACKING_URI alone is checked by each stage as it starts.
+(:func:`check_runnable`: the torch device), and the tracking store (MLFLOW_TRACKING_URI, or the workspace's
+mlflow.db) can be used: a database file is read whole, a server answers a real query. A problem is one line and exit
+2 while every earlier output is still in place. DVC runs it when params.yaml or its code changes (and with -f); it
+tracks no environment variable, so a new MLFLOW_TRACKING_URI alone is checked by each stage as it starts.
 
 The file it writes says only that the check passed, the same bytes whatever the params: a later stage depends on it
 for the order of the DAG, and is rerun for its own params, never for this file."""
@@ -19,7 +19,9 @@ PASSED = "params and tracking store checked (stages/preflight.py)\n"
 
 def check_runnable(p: Params) -> None:
     """What a stage would refuse in params that lfdt.config accepts (every value valid, every key present): the
-    torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`)."""
+    torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`). The
+    twin's task names are the twin stages' own check: looking them up here would make every stage of Table I
+    depend on the task registry."""
     if p.device != "cpu":  # torch loads in seconds: only when there is a device to look for
         from lfdt.nets import torch_device
 
@@ -32,6 +34,7 @@ def run() -> None:
     uri = mlflow_runs.tracking_uri()
     mlflow_runs.check_tracking_uri(uri, thorough=True)  # a store cut short answers no query
     mlflow_runs.experiment_name()  # LFDT_MLFLOW_EXPERIMENT: one the store can keep
+    mlflow_runs.check_store_answers(uri)  # a server's /health can answer while its API fails
     parallel.start_method()  # LFDT_WORKER_START: how the matrix stages start their workers
     write_atomic(args.out, lambda tmp: tmp.write_text(PASSED))
     print(f"preflight: {args.params} valid; tracking store {redact(uri)} usable")

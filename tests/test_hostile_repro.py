@@ -37,7 +37,9 @@ def _set(section: str, **values) -> Callable[[dict], None]:
     (_set("demos", per_pairing=1e29), None, "demos.per_pairing = 1e+29: Input should be a valid integer "
      "(accepted: an integer > 0 and <= 2147483647)", []),
     (lambda params: params.update(device="cuda"), None, "device = 'cuda', but torch", ["-f"]),
-], ids=["bad-param", "bad-tracking-uri", "missing-section", "absurd-size", "forced-repro-missing-device"])
+    (lambda params: params["bc"].pop("iterations"), None, "lacks bc.iterations (default 8000)", []),
+], ids=["bad-param", "bad-tracking-uri", "missing-section", "absurd-size", "forced-repro-missing-device",
+        "deleted-key"])
 def test_a_bad_input_stops_repro_before_any_output_is_removed(smoke_project, monkeypatch, change, uri, says, args):
     """DVC removes a stage's outputs before it runs the stage (`dvc repro -f`: every stage's): the preflight stage,
     upstream of every stage that reads params, fails first on a bad or missing params value, a torch device this

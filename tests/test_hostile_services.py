@@ -285,6 +285,8 @@ CASES = [
      ["MLFLOW_TRACKING_URI=http://{http503}", "HTTP 503"]),
     ("tracking-api-503", stage_start, {"MLFLOW_TRACKING_URI": "http://{healthy_but_down}"}, [],
      ["MLFLOW_TRACKING_URI=http://{healthy_but_down}", "cannot be read", "503"]),
+    ("tracking-api-503-preflight", preflight, {"MLFLOW_TRACKING_URI": "http://{healthy_but_down}"}, [],
+     ["MLFLOW_TRACKING_URI=http://{healthy_but_down}", "cannot be read", "503"]),
     ("tracking-503-sweep", sweep, {"MLFLOW_TRACKING_URI": "http://{http503}"}, [],
      ["MLFLOW_TRACKING_URI=http://{http503}", "HTTP 503"]),
     ("deploy-registry-down", deploy, {"MLFLOW_TRACKING_URI": "http://{refused}"}, [],
@@ -372,3 +374,38 @@ def test_a_healthy_looking_service_passes_the_same_checks(tmp_path):
         assert inputs.env_choice("LFDT_NUMERICS", ("pinned", "native"), "pinned") == "native"
         mp.setenv("LFDT_NUMERICS", "")
         assert inputs.env_choice("LFDT_NUMERICS", ("pinned", "native"), "pinned") == "pinned"
+
+
+def _raise(exc: BaseException) -> Callable[..., None]:
+    def fail(*args, **kwargs) -> None:
+        raise exc
+    return fail
+
+
+COMMANDS = {  # a command line, the function its work is in, what to patch it in, its arguments
+    "sweep": ("lfdt.sweep.__main__", "run_sweep", []),
+    "restore": ("lfdt.restore", "restore", []),
+    "views": ("lfdt.mlflow_views", "install", []),
+}
+
+
+@pytest.mark.parametrize("fault", ["ctrl-c", "disk-full"])
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_ctrl_c_or_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, command, fault):
+    """The commands besides the stages (sweep, restore, the MLflow views): Ctrl-C is one line saying what is left
+    and how to go on, exit 130; an OSError one line naming the file and the OS's reason, exit 2; no traceback."""
+    import importlib
+
+    module, function, args = COMMANDS[command]
+    mod = importlib.import_module(module)
+    exc = KeyboardInterrupt() if fault == "ctrl-c" else \
+        OSError(28, "No space left on device", str(tmp_path / "out.json"))
+    monkeypatch.setattr(mod, function, _raise(exc))
+    monkeypatch.chdir(tmp_path)
+    code, stderr = _in_thread(lambda: mod.main(args))
+    errors = [line for line in stderr.splitlines() if line.startswith("error: ")]
+    assert "Traceback" not in stderr and len(errors) == 1 and stderr.count("\n") == 1, stderr[-3000:]
+    if fault == "ctrl-c":
+        assert code == 130 and errors[0].startswith("error: interrupted (Ctrl-C): "), stderr
+    else:
+        assert code == 2 and errors[0] == f"error: {tmp_path / 'out.json'}: No space left on device", stderr

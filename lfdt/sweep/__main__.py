@@ -16,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-from lfdt.errors import StageError
+from lfdt.errors import StageError, one_line_errors
 from lfdt.sweep.chain import Remote
 from lfdt.sweep.coordinator import describe, run_points, run_sweep
 from lfdt.sweep.plan import make_plan
@@ -51,33 +51,33 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Parse, run, print a summary; errors that say all a user needs exit 2 with one line."""
+    """Parse, run, print a summary; errors that say all a user needs exit 2 with one line, Ctrl-C one line."""
     args = parser().parse_args(argv)
-    root = Path.cwd()
-    try:
-        if args.list:
-            points = expand((root / "params.yaml").read_text(), args.sets) if args.sets else []
-            print(describe(make_plan(root)))  # of the workspace's params: a point's grid may add chains
-            for i, point in enumerate(points, 1):
-                print(f"point {i} ({point.name}): {point.describe()}")
-            return 0
-        if args.endpoint_url and not args.remote_url:
-            raise StageError("--endpoint-url needs --remote-url")
-        if args.sets and args.chains:
-            raise StageError("--chains runs part of one point's sweep: it cannot be combined with --set")
-        remote = Remote(args.remote, args.remote_url, args.endpoint_url)
-        options = dict(address=args.address, cpus_per_chain=args.cpus_per_chain, repo_url=args.repo_url,
-                       forward_env=args.forward_env, workdir=args.workdir)
-        if args.sets:
-            summary = run_points(root, args.sets, remote, **options)
-            print(f"sweep done in {summary['wall_s']:.0f} s: {len(summary['points_run'])} points recorded as "
-                  f"experiments ({', '.join(summary['points_run']) or 'none new'}); `dvc exp apply <name>` brings "
-                  f"one into the workspace")
-            return 0
-        summary = run_sweep(root, remote, only=args.chains, **options)
-    except StageError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    return one_line_errors(lambda: _run(args, Path.cwd()), "chains that finished are kept in the run cache; the "
+                           "same command goes on from them")
+
+
+def _run(args: argparse.Namespace, root: Path) -> int:
+    if args.list:
+        points = expand((root / "params.yaml").read_text(), args.sets) if args.sets else []
+        print(describe(make_plan(root)))  # of the workspace's params: a point's grid may add chains
+        for i, point in enumerate(points, 1):
+            print(f"point {i} ({point.name}): {point.describe()}")
+        return 0
+    if args.endpoint_url and not args.remote_url:
+        raise StageError("--endpoint-url needs --remote-url")
+    if args.sets and args.chains:
+        raise StageError("--chains runs part of one point's sweep: it cannot be combined with --set")
+    remote = Remote(args.remote, args.remote_url, args.endpoint_url)
+    options = dict(address=args.address, cpus_per_chain=args.cpus_per_chain, repo_url=args.repo_url,
+                   forward_env=args.forward_env, workdir=args.workdir)
+    if args.sets:
+        summary = run_points(root, args.sets, remote, **options)
+        print(f"sweep done in {summary['wall_s']:.0f} s: {len(summary['points_run'])} points recorded as "
+              f"experiments ({', '.join(summary['points_run']) or 'none new'}); `dvc exp apply <name>` brings "
+              f"one into the workspace")
+        return 0
+    summary = run_sweep(root, remote, only=args.chains, **options)
     print(f"sweep done in {summary['wall_s']:.0f} s: {len(summary['chains_run'])} chains run, "
           f"{len(summary['chains_skipped'])} finished earlier; the final `dvc repro` ran "
           f"{', '.join(summary['final_ran']) or 'nothing'}")
