@@ -6,8 +6,9 @@ metrics or plots (the experts' curves and ``reports/experts.json``, the dynamics
 in the same local cache whenever the stage succeeded: this command checks out the cached outputs and copies those
 back from that copy, by the hashes ``dvc.lock`` names, so results never committed to git come back as well. DVC keeps
 no copy of the ``cache: false`` outputs of the four stages that also have plain ones (``fingerprint``, ``report``,
-``register_policies``, ``twin_report``: DVC does not run-cache them): each such output that is missing is named, with
-the git command that brings back its last committed version.
+``register_policies``, ``twin_report``: DVC does not run-cache them), nor of any in a fresh clone: such an output
+comes back from the last commit when the version there is the one ``dvc.lock`` names (git's index untouched);
+otherwise it is named, with the commands that bring back its last committed version or make it again.
 A ``cache: false`` output that is in the workspace is left as it is (it may be newer than ``dvc.lock``); a cached one
 is checked out as ``dvc checkout`` does (files a failing stage half-wrote into it are refused by name, and replaced
 with ``--force``).
@@ -43,12 +44,16 @@ class Restored:
     """Cached outputs that ``dvc checkout`` brought back."""
     copied: list[str] = field(default_factory=list)
     """``cache: false`` outputs copied back from the run cache's copy."""
+    from_git: list[str] = field(default_factory=list)
+    """``cache: false`` outputs written from the last commit, whose version there is the one ``dvc.lock`` names."""
     missing: list[str] = field(default_factory=list)
-    """``cache: false`` outputs absent from the workspace whose copy the cache does not hold."""
+    """``cache: false`` outputs absent from the workspace whose copy neither the cache nor the last commit holds."""
     stages: dict[str, str] = field(default_factory=dict)
     """The stage of each missing output."""
     why: dict[str, str] = field(default_factory=dict)
     """Why the cache holds no copy of each missing output."""
+    committed: set[str] = field(default_factory=set)
+    """The missing outputs whose last commit holds another version than ``dvc.lock`` names."""
     checkout_error: str = ""
     """What ``dvc checkout`` refused, if it did (the ``cache: false`` outputs are still brought back)."""
 
@@ -171,12 +176,42 @@ def _restore_locked(repo, root: Path, locked: dict, names: list[str], stages: li
                         raise NotRestorable(f"{out.def_path}: DVC's copy could not be checked out "
                                             f"({_message(e)})") from None
                     done.copied.append(out.def_path)
+                elif (committed := _from_git(root, out)) is True:
+                    done.from_git.append(out.def_path)
                 else:
                     done.missing.append(out.def_path)
                     done.stages[out.def_path] = name
                     done.why[out.def_path] = (
                         "DVC's run cache holds none here (a fresh clone, `dvc gc`, `dvc repro --no-commit`)"
-                        if name in kept else "DVC keeps none for a stage with plain `cache: false` outputs")
+                        if name in kept else "DVC keeps none for a stage with plain `cache: false` outputs") + (
+                        "; the last commit holds another version" if committed is False else
+                        "; the last commit holds none")
+                    if committed is False:
+                        done.committed.add(out.def_path)
+
+
+def _from_git(root: Path, out) -> bool | None:
+    """Write the last commit's version of the ``cache: false`` output ``out`` (git's index untouched) and keep it if
+    DVC hashes it as ``dvc.lock`` names it: True; False (nothing left written) if the commit holds another version,
+    None if it holds none (not committed, not a git repository)."""
+    import shutil
+    import subprocess
+
+    path = root / str(out.def_path)
+    try:
+        proc = subprocess.run(["git", "restore", "--source=HEAD", "--worktree", "--", str(out.def_path)], cwd=root,
+                              capture_output=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    if proc.returncode != 0 or not path.exists():
+        return None
+    if out.hash_info and not out.changed_checksum():
+        return True
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
+    return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -198,14 +233,16 @@ def _report(done: Restored, force: bool) -> int:
         print(f"checked out  {path}")
     for path in done.copied:
         print(f"copied back  {path}  (cache: false; the run cache's copy)")
+    for path in done.from_git:
+        print(f"from git     {path}  (cache: false; the last commit's copy is the version dvc.lock names)")
     if done.checkout_error:
         hint = "" if force else " (what a failing stage half-wrote: `python -m lfdt.restore --force` replaces it)"
         print(f"error: {done.checkout_error}{hint}", file=sys.stderr)
     for path in done.missing:
+        git = f"`git checkout -- {path}` brings back its last committed version, " if path in done.committed else ""
         print(f"error: {path}: not in the workspace, and DVC's cache holds no copy of the version dvc.lock names "
-              f"({done.why[path]}): `git checkout -- {path}` brings back its last committed version, "
-              f"`dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
-    if not (done.checked_out or done.copied or done.missing or done.checkout_error):
+              f"({done.why[path]}): {git}`dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
+    if not (done.checked_out or done.copied or done.from_git or done.missing or done.checkout_error):
         print("nothing to bring back: every output that dvc.lock names is in the workspace")
     return 2 if done.missing or done.checkout_error else 0
 

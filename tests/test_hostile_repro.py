@@ -95,9 +95,10 @@ def _kept_by_dvc(stage) -> bool:
 def test_what_dvc_removes_comes_back_by_the_readme_command(smoke_project):
     """For every kind of output dvc.yaml has (cached or not, a file or a folder, an output, a metric or a plot,
     persistent or not, of a stage DVC's run cache keeps or not), one output of that kind, removed as DVC removes it
-    before running its stage, comes back byte for byte by the README's command, though none of them was committed
-    to git, where DVC keeps a copy; each of the others is named by that command (exit 2) and comes back, as
-    committed, by `git checkout -- <file>`."""
+    before running its stage, comes back byte for byte by the README's command: from DVC's cache, from the run
+    cache's copy (never committed to git), or, for a stage DVC keeps no copy of, from the last commit when that holds
+    the version dvc.lock names. Where the commit holds another version, the output is named (exit 2) with `git
+    checkout -- <file>`, and nothing is left written in its place."""
     from dvc.repo import Repo
 
     assert f"`{RESTORE} <stage>`" in _readme_section() and "`git checkout -- <file>`" in _readme_section()
@@ -122,22 +123,39 @@ def test_what_dvc_removes_comes_back_by_the_readme_command(smoke_project):
     subprocess.run([*git, "add", "-f", "--", *committed], cwd=dst, check=True)
     subprocess.run([*git, "commit", "-qm", "what DVC keeps no copy of", "--", *committed], cwd=dst, check=True)
     before = {kind: _files(path) for kind, path in paths.items()}
-    for path in paths.values():
-        if path.is_dir():
-            shutil.rmtree(path)
-        else:
-            path.unlink()
-    out = _restore(dst, *sorted({stage for stage, _ in kinds.values()}), fails=True)
-    named = {line.split(":")[1].strip() for line in out.splitlines() if line.startswith("error: ")}
-    assert named == {rel[k] for k in kinds if not k[0]}, out
-    assert all(f"`git checkout -- {rel[k]}`" in out for k in kinds if not k[0]), out
-    lost = [rel[k] for k in kinds if k[0] and _files(paths[k]) != before[k]]
-    assert not lost, f"not brought back byte for byte by `{RESTORE}`: {lost}\n{out}"
-    for k in kinds:
-        if not k[0]:
-            subprocess.run(["git", "checkout", "--", rel[k]], cwd=dst, check=True)
+    stages = sorted({stage for stage, _ in kinds.values()})
+
+    def remove() -> None:
+        for path in paths.values():
+            if path.is_dir():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+
+    remove()
+    out = _restore(dst, *stages)
     lost = [rel[k] for k in kinds if _files(paths[k]) != before[k]]
-    assert not lost, f"not brought back byte for byte by `git checkout`: {lost}"
+    assert not lost, f"not brought back byte for byte by `{RESTORE}`: {lost}\n{out}"
+    assert {line.split()[2] for line in out.splitlines() if line.startswith("from git")} == \
+        {rel[k] for k in kinds if not k[0]}, out
+    assert subprocess.run(["git", "status", "--porcelain", "--", *committed], cwd=dst, capture_output=True,
+                          text=True, check=True).stdout == "", "restore changed git's index or the files"
+
+    file = next(k for k in kinds if not k[0] and not k[5])  # a committed file: commit another version of it
+    paths[file].write_bytes(before[file][paths[file].as_posix()] + b"edited by hand\n")
+    subprocess.run([*git, "commit", "-qm", "another version", "--", rel[file]], cwd=dst, check=True)
+    try:
+        remove()
+        out = _restore(dst, *stages, fails=True)
+        named = {line.split(":")[1].strip() for line in out.splitlines() if line.startswith("error: ")}
+        assert named == {rel[file]}, out
+        assert f"`git checkout -- {rel[file]}`" in out and "the last commit holds another version" in out, out
+        assert not paths[file].exists(), "the commit's other version was left in the workspace"
+        lost = [rel[k] for k in kinds if k != file and _files(paths[k]) != before[k]]
+        assert not lost, f"not brought back byte for byte by `{RESTORE}`: {lost}\n{out}"
+    finally:  # the version dvc.lock names, committed again
+        paths[file].write_bytes(before[file][paths[file].as_posix()])
+        subprocess.run([*git, "commit", "-qm", "the version dvc.lock names", "--", rel[file]], cwd=dst, check=True)
 
 
 def test_a_failing_stage_s_outputs_come_back_and_a_newer_file_stays(smoke_project):
