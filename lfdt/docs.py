@@ -324,7 +324,8 @@ def issue37(root: Path) -> str:
     pushes further out across the box than the hand did, its distance to the hand, the open-loop replay of the
     labels, and F's error on two-arm pushes across the box and in yaw (a share of predicting no change)."""
     rows = [r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
-            if r["trial"].startswith(ISSUE37_PREFIX) and not _in_a_search(root, r["trial"])]
+            if r["trial"].startswith(ISSUE37_PREFIX) and not _in_a_search(root, r["trial"])
+            and r["trial"] not in {t for pair in CONFIRMATIONS for t in pair}]
     lines = ["| trial | change | method | demos | success (worst seed) | path rule (worst seed) | path rule: vs BC "
              "w/o | replacing robot further out than the hand (cm) | replacing robot to the hand (cm) | replay of the "
              "labels solves | F on pushes: across / yaw |", "| --- |" + " --- |" * 10]
@@ -451,12 +452,62 @@ def search(root: Path) -> str:
     return "\n".join(out).rstrip()
 
 
+CONFIRMATIONS: tuple[tuple[str, str], ...] = (
+    ("i37-confirm-d50-t13", "i37-confirm-d50-t0"),
+    ("i37-confirm-d200-t13", "i37-confirm-d200-t0"),
+)
+"""(candidate, baseline) development trials that confirm a search's pick on development seeds the search did not use;
+named here before they ran."""
+
+
+def _cm(root: Path, trial: str) -> str:
+    v = _seed_mean(root, trial, "lfdt", "diag/missing_minus_hand_across_m")
+    return "–" if v == "–" else f"{100 * float(v):.2f}"
+
+
+def confirm(root: Path) -> str:
+    """Each pair of :data:`CONFIRMATIONS` that has run: both trials' success by both rules, and the candidate's paired
+    difference from the baseline over the same seeds and start states, with its 95 % interval."""
+    import numpy as np
+
+    from lfdt.evaluation import paired_difference_interval
+
+    trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+              if r["method"] == "lfdt"}
+    lines = ["| candidate | baseline | demos | seeds | candidate: success (worst seed) | baseline: success (worst "
+             "seed) | difference (95 % interval) | path rule: difference (95 % interval) | replacing robot further out "
+             "than the hand (cm): candidate / baseline |", "| --- |" + " --- |" * 8]
+    ran = [(c, b) for c, b in CONFIRMATIONS if c in trials and b in trials]
+    for cand, base in ran:
+        c, b = trials[cand], trials[base]
+        diffs = []
+        for suffix in ("", "_path"):
+            top, low = (_outcome_rows(root, t, "lfdt", f"{r['demos']}{suffix}") for t, r in ((cand, c), (base, b)))
+            if top is None or low is None or sorted(top) != sorted(low):
+                diffs.append("–")
+                continue
+            top, low = (np.array([r[k] for k in sorted(r)], dtype=float) for r in (top, low))
+            lo, hi = paired_difference_interval(top, low)
+            diffs.append(f"{100 * (top - low).mean():+.1f} ({100 * lo:+.1f} to {100 * hi:+.1f})")
+        lines.append(f"| {cand} ({c['changes'] or 'params.yaml'}) | {base} ({b['changes'] or 'params.yaml'}) | "
+                     f"{c['demos']} | {c['seeds']} | {c['success_pct']} % ({c['worst_seed_pct']} %) | "
+                     f"{b['success_pct']} % ({b['worst_seed_pct']} %) | {diffs[0]} | {diffs[1]} | "
+                     f"{_cm(root, cand)} / {_cm(root, base)} |")
+    if not ran:
+        return "No confirmation has run yet."
+    cpus = sorted({f"{trials[t]['cpu_model']} ({trials[t]['numerics']})" for pair in ran for t in pair})
+    dates = sorted({trials[t]["date"] for pair in ran for t in pair})
+    lines += ["", f"Development start states (200 per seed); {', '.join(cpus)}; {dates[0]} to {dates[-1]}."]
+    return "\n".join(lines)
+
+
 BLOCKS: dict[str, Callable[[Path], str]] = {
     "load_test": load_test,
     "table1": table1, "headline": headline, "cross_cpu": cross_cpu, "run_time": run_time,
     "run_time_line": run_time_line, "benchmarks": benchmarks, "experiments": experiments, "twin": twin,
     "translator_diagnostics": translator_diagnostics, "ablations": ablations, "ablation_caption": ablation_caption,
-    "bc_seed_spread": bc_seed_spread, "issue37": issue37, "probe_halves": probe_halves, "search": search}
+    "bc_seed_spread": bc_seed_spread, "issue37": issue37, "probe_halves": probe_halves, "search": search,
+    "confirm": confirm}
 """Block name -> its renderer."""
 
 _BLOCK = re.compile(r"(<!-- generated:(\w+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.S)

@@ -54,3 +54,26 @@ def test_a_search_block_pairs_its_best_trial_with_its_baseline(tmp_path: Path):
         [table[0].replace("trial,", "trial,baseline,", 1)] +
         [line.replace(",", f",{line.startswith('0,')},", 1) for line in table[1:]]) + "\n")
     assert docs.search(tmp_path) == block  # the table's baseline column (tools/dev_search.py) names the same row
+
+
+def test_a_confirmation_block_pairs_candidate_and_baseline_by_both_rules(tmp_path: Path, monkeypatch):
+    """The confirmation block: each pair that ran, both success rules, the paired difference over the same seeds
+    and start states; a pair whose trials have not run is left out."""
+    exp = tmp_path / "docs" / "experiments"
+    (exp / "outcomes").mkdir(parents=True)
+    fields = ["date", "trial", "method", "demos", "seeds", "cpu_model", "numerics", "changes", "success_pct",
+              "worst_seed_pct"]
+    rows = [["2026-12-06", "c", "lfdt", "50", "45 46", "Some CPU", "pinned", "translator.lambda_dyn=3.0", "75.0",
+             "50.0"],
+            ["2026-12-06", "b", "lfdt", "50", "45 46", "Some CPU", "pinned", "", "37.5", "25.0"]]
+    (exp / "trials.csv").write_text("\n".join(",".join(r) for r in [fields, *rows]) + "\n")
+    outcomes = {("c", ""): {45: "1110", 46: "1100"}, ("b", ""): {45: "1100", 46: "1000"},
+                ("c", "_path"): {45: "1100", 46: "1100"}, ("b", "_path"): {45: "1100", 46: "1100"}}
+    for (t, suffix), by_seed in outcomes.items():
+        (exp / "outcomes" / f"{t}_lfdt-d50{suffix}.csv").write_text(
+            "seed,outcomes\n" + "".join(f"{s},{o}\n" for s, o in by_seed.items()))
+    monkeypatch.setattr(docs, "CONFIRMATIONS", (("c", "b"), ("never-ran", "b")))
+    block = docs.confirm(tmp_path)
+    assert "| c (translator.lambda_dyn=3.0) | b (params.yaml) | 50 | 45 46 | 75.0 % (50.0 %) | 37.5 % (25.0 %) | " \
+           "+25.0 (" in block, block
+    assert block.count("\n| ") == 2 and "| +0.0 (" in block and "Some CPU (pinned)" in block, block
