@@ -457,7 +457,7 @@ CONFIRMATIONS: tuple[tuple[str, str], ...] = (
     ("i37-confirm-d200-t13", "i37-confirm-d200-t0"),
 )
 """(candidate, baseline) development trials that confirm a search's pick on development seeds the search did not use;
-named here before they ran."""
+their names and hypotheses written (tools/dev_trial.py --hypothesis, trials.csv) before they ran."""
 
 
 def _cm(root: Path, trial: str) -> str:
