@@ -556,9 +556,12 @@ class TwinParams(Strict):
     """Dynamics models of the twin's domain Y, with actions at unit scale (F^-1's error on the real robot's recorded
     demonstration actions fell from 0.9-1.2 to 0.4-0.6 mm; README, twin development)."""
     translator: TranslatorConfig = TranslatorConfig(iterations=4_000, kinematics="learned", batch_size=32,
-                                                    lambda_hand=100.0, disc_input="state", adv_on="all")
-    """Translator of the twin (the same loss; end positions instead of joint states), with lambda_hand 100 (not in the
-    paper; it ties the missing robot's end to the human's hand): on the development start states LfDT in peg
+                                                    lambda_hand=100.0, disc_input="state", adv_on="all",
+                                                    # written out: the box push's translator defaults are not the twin's
+                                                    lambda_dyn=10.0, lambda_id=100.0, lambda_side=0.0,
+                                                    learning_rate=3e-4)
+    """Translator of the twin (the same loss; end positions instead of joint states), with lambda_hand 100 (not in
+    the paper; it ties the missing robot's end to the human's hand): on the development start states LfDT in peg
     insertion went from 35 to 82 % (twin seeds 0-2) and from 40 to 94 % (6-8) against lambda_hand 1, in block push
     from 30 to 53 % and from 23 to 29 % (README, twin development). D as in the paper (disc_input 'state', adv_on
     'all'): the box push's D lowered the twin's block push (README). A learnt hand offset (hand_offset) helped block

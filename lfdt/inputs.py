@@ -17,7 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from lfdt.errors import InputError
+from lfdt import errors
+from lfdt.errors import InputError, StageError
 
 T = TypeVar("T")
 
@@ -341,3 +342,20 @@ def sqlite_answers(path: str | Path, what: str, thorough: bool = False, timeout_
         raise error(f"{what}: {path} does not answer a query ({err}: the file is damaged or cut short){hint}") from None
     finally:
         con.close()
+
+
+def one_line_errors(body: Callable[[], int], interrupted: str) -> int:
+    """Run a command line's ``body`` (its exit code): a :class:`StageError` or an OSError (a full disk, no
+    permission: :func:`os_error_message`) is one line and exit 2, Ctrl-C one line saying ``interrupted``
+    (what is left, how to go on) and :data:`lfdt.errors.INTERRUPTED`; anything else is a bug and raises."""
+    try:
+        return body()
+    except StageError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"error: interrupted (Ctrl-C): {interrupted}", file=sys.stderr)
+        return errors.INTERRUPTED
+    except OSError as err:
+        print(f"error: {os_error_message(err)}", file=sys.stderr)
+        return 2

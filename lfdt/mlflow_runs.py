@@ -277,7 +277,8 @@ def _first_query(uri: str, name: str):
 def check_store_answers(uri: str) -> None:
     """Preflight's check of a tracking server or database server: it answers a read-only query (the experiment's
     lookup), not only /health or a TCP connection. An SQLite file is checked whole by :func:`check_tracking_uri`
-    (``thorough``) instead; nothing is created."""
+    (``thorough``) instead. No experiment or run is created (an empty database gets MLflow's tables, as the first
+    stage would give it)."""
     base = uri.split("://", 1)[0].lower().split("+")[0] if "://" in uri else ""
     if base in ("http", "https") or base in DB_SCHEMES:
         _first_query(uri, experiment_name())

@@ -15,7 +15,7 @@ import sys
 from dataclasses import dataclass
 
 from lfdt import mlflow_runs
-from lfdt.errors import one_line_errors
+from lfdt.inputs import one_line_errors
 
 SHARED_VIEW_TAG = "mlflow.sharedViewState."
 """Prefix of the experiment tags MLflow's UI reads a shared runs-table view from (MLflow 3)."""

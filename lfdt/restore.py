@@ -29,7 +29,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lfdt.errors import InputError, StageError, one_line_errors
+from lfdt.errors import InputError, StageError
+from lfdt.inputs import one_line_errors
 
 
 class NotRestorable(StageError):

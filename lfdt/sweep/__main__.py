@@ -16,7 +16,8 @@ import os
 import sys
 from pathlib import Path
 
-from lfdt.errors import StageError, one_line_errors
+from lfdt.errors import StageError
+from lfdt.inputs import one_line_errors
 from lfdt.sweep.chain import Remote
 from lfdt.sweep.coordinator import describe, run_points, run_sweep
 from lfdt.sweep.plan import make_plan
