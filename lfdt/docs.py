@@ -455,6 +455,8 @@ def search(root: Path) -> str:
 CONFIRMATIONS: tuple[tuple[str, str], ...] = (
     ("i37-confirm-d50-t13", "i37-confirm-d50-t0"),
     ("i37-confirm-d200-t13", "i37-confirm-d200-t0"),
+    ("i37-confirm-d50-side0", "i37-confirm-d50-t0"),
+    ("i37-confirm-d200-side0", "i37-confirm-d200-t0"),
 )
 """(candidate, baseline) development trials that confirm a search's pick on development seeds the search did not use;
 their names and hypotheses written (tools/dev_trial.py --hypothesis, trials.csv) before they ran."""
