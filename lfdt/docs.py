@@ -405,9 +405,7 @@ def _in_a_search(root: Path, trial: str) -> bool:
 def search(root: Path) -> str:
     """Each study of ``tools/dev_search.py`` (docs/experiments/search_<study>.csv): every finished trial with its knobs
     and outcomes, and the best trial's paired difference from the baseline trial (the same seeds and start states)."""
-    import numpy as np
 
-    from lfdt.evaluation import paired_difference_interval
 
     trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
               if r["method"] == "lfdt"}
@@ -437,11 +435,11 @@ def search(root: Path) -> str:
         base = _outcome_rows(root, f"{study}-t{b}", "lfdt", demos) if first else None
         top = _outcome_rows(root, f"{study}-t{best['trial']}", "lfdt", demos)
         line = f"Best of {len(run)} trials: t{best['trial']}, {best['success_pct']} %"
-        if base is not None and top is not None and best is not first_row and sorted(base) == sorted(top):
-            base, top = (np.array([r[s] for s in sorted(r)], dtype=float) for r in (base, top))
-            lo, hi = paired_difference_interval(top, base)
+        paired = _paired(top, base) if best is not first_row else None
+        if paired:
+            mean, lo, hi = paired
             line += (f"; against t{b} (params.yaml), paired over the same seeds and start states: "
-                     f"{100 * (top - base).mean():+.1f} points (95 % interval {100 * lo:+.1f} to {100 * hi:+.1f}), "
+                     f"{mean:+.1f} points (95 % interval {lo:+.1f} to {hi:+.1f}), "
                      f"an interval that does not allow for having picked the best of {len(run)}")
         if first:
             names = [f"{study}-t{r['trial']}" for r in rows]
@@ -462,6 +460,20 @@ CONFIRMATIONS: tuple[tuple[str, str], ...] = (
 their names and hypotheses written (tools/dev_trial.py --hypothesis, trials.csv) before they ran."""
 
 
+def _paired(top: dict[int, list[int]] | None, base: dict[int, list[int]] | None) -> tuple[float, float, float] | None:
+    """``top`` - ``base`` in points of success over the same seeds and start states (0/1 outcomes by seed), with its
+    95 % interval (:func:`lfdt.evaluation.paired_difference_interval`); None unless both ran on the same seeds."""
+    import numpy as np
+
+    from lfdt.evaluation import paired_difference_interval
+
+    if top is None or base is None or sorted(top) != sorted(base):
+        return None
+    top, base = (np.array([r[s] for s in sorted(r)], dtype=float) for r in (top, base))
+    lo, hi = paired_difference_interval(top, base)
+    return 100 * (top - base).mean(), 100 * lo, 100 * hi
+
+
 def _cm(root: Path, trial: str) -> str:
     v = _seed_mean(root, trial, "lfdt", "diag/missing_minus_hand_across_m")
     return "–" if v == "–" else f"{100 * float(v):.2f}"
@@ -470,9 +482,7 @@ def _cm(root: Path, trial: str) -> str:
 def confirm(root: Path) -> str:
     """Each pair of :data:`CONFIRMATIONS` that has run: both trials' success by both rules, and the candidate's paired
     difference from the baseline over the same seeds and start states, with its 95 % interval."""
-    import numpy as np
 
-    from lfdt.evaluation import paired_difference_interval
 
     trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
               if r["method"] == "lfdt"}
@@ -484,13 +494,9 @@ def confirm(root: Path) -> str:
         c, b = trials[cand], trials[base]
         diffs = []
         for suffix in ("", "_path"):
-            top, low = (_outcome_rows(root, t, "lfdt", f"{r['demos']}{suffix}") for t, r in ((cand, c), (base, b)))
-            if top is None or low is None or sorted(top) != sorted(low):
-                diffs.append("–")
-                continue
-            top, low = (np.array([r[k] for k in sorted(r)], dtype=float) for r in (top, low))
-            lo, hi = paired_difference_interval(top, low)
-            diffs.append(f"{100 * (top - low).mean():+.1f} ({100 * lo:+.1f} to {100 * hi:+.1f})")
+            paired = _paired(*(_outcome_rows(root, t, "lfdt", f"{r['demos']}{suffix}") for t, r in ((cand, c),
+                                                                                                   (base, b))))
+            diffs.append("{:+.1f} ({:+.1f} to {:+.1f})".format(*paired) if paired else "–")
         lines.append(f"| {cand} ({c['changes'] or 'params.yaml'}) | {base} ({b['changes'] or 'params.yaml'}) | "
                      f"{c['demos']} | {c['seeds']} | {c['success_pct']} % ({c['worst_seed_pct']} %) | "
                      f"{b['success_pct']} % ({b['worst_seed_pct']} %) | {diffs[0]} | {diffs[1]} | "

@@ -20,4 +20,3 @@ class OutputError(StageError):
 class InputError(StageError):
     """A user-given file, folder or argument that cannot be used as it is (:mod:`lfdt.inputs`); names it and what
     was expected."""
-

@@ -90,6 +90,11 @@ DATABRICKS = ("databricks", "databricks-uc", "uc")
 """Tracking URIs of Databricks (bare, or ``databricks://<profile>``): MLflow's client finds their host itself."""
 
 
+def _scheme(uri: str) -> str:
+    """The URI's scheme, lower case, with its driver (``postgresql+psycopg2``); '' for a bare path."""
+    return uri.split("://", 1)[0].lower() if "://" in uri else ""
+
+
 def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S, thorough: bool = False) -> None:
     """Check the tracking store ``uri`` before any run is opened; TrackingUnavailable names it and what is wrong.
 
@@ -103,7 +108,7 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S, thorough: boo
     """
     if uri.lower() in DATABRICKS:
         return  # MLflow's own spelling of a Databricks workspace (its CLI profile): no address to check here
-    scheme = uri.split("://", 1)[0].lower() if "://" in uri else ""
+    scheme = _scheme(uri)
     base = scheme.split("+")[0]
     if base in ("http", "https"):
         _check_server(uri, timeout)
@@ -279,7 +284,7 @@ def check_store_answers(uri: str) -> None:
     lookup), not only /health or a TCP connection. An SQLite file is checked whole by :func:`check_tracking_uri`
     (``thorough``) instead. No experiment or run is created (an empty database gets MLflow's tables, as the first
     stage would give it)."""
-    base = uri.split("://", 1)[0].lower().split("+")[0] if "://" in uri else ""
+    base = _scheme(uri).split("+")[0]
     if base in ("http", "https") or base in DB_SCHEMES:
         _first_query(uri, experiment_name())
 

@@ -54,7 +54,7 @@ class Restored:
     why: dict[str, str] = field(default_factory=dict)
     """Why the cache holds no copy of each missing output."""
     committed: set[str] = field(default_factory=set)
-    """The missing outputs whose last commit holds another version than ``dvc.lock`` names."""
+    """The missing outputs whose last commit holds another version than ``dvc.lock`` names (the others': none)."""
     checkout_error: str = ""
     """What ``dvc checkout`` refused, if it did (the ``cache: false`` outputs are still brought back)."""
 
@@ -184,9 +184,7 @@ def _restore_locked(repo, root: Path, locked: dict, names: list[str], stages: li
                     done.stages[out.def_path] = name
                     done.why[out.def_path] = (
                         "DVC's run cache holds none here (a fresh clone, `dvc gc`, `dvc repro --no-commit`)"
-                        if name in kept else "DVC keeps none for a stage with plain `cache: false` outputs") + (
-                        "; the last commit holds another version" if committed is False else
-                        "; the last commit holds none")
+                        if name in kept else "DVC keeps none for a stage with plain `cache: false` outputs")
                     if committed is False:
                         done.committed.add(out.def_path)
 
@@ -240,9 +238,11 @@ def _report(done: Restored, force: bool) -> int:
         hint = "" if force else " (what a failing stage half-wrote: `python -m lfdt.restore --force` replaces it)"
         print(f"error: {done.checkout_error}{hint}", file=sys.stderr)
     for path in done.missing:
-        git = f"`git checkout -- {path}` brings back its last committed version, " if path in done.committed else ""
+        other = path in done.committed
+        git = f"`git checkout -- {path}` brings back its last committed version, " if other else ""
         print(f"error: {path}: not in the workspace, and DVC's cache holds no copy of the version dvc.lock names "
-              f"({done.why[path]}): {git}`dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
+              f"({done.why[path]}; the last commit holds {'another version' if other else 'none'}): "
+              f"{git}`dvc repro -s {done.stages[path]}` makes it again", file=sys.stderr)
     if not (done.checked_out or done.copied or done.from_git or done.missing or done.checkout_error):
         print("nothing to bring back: every output that dvc.lock names is in the workspace")
     return 2 if done.missing or done.checkout_error else 0

@@ -18,7 +18,10 @@ def run() -> None:
     task, p = args.task, all_params.twin
     torch_device(all_params.device)  # before any job starts
     for key in ("task_translator", "task_bc"):
-        registry.check_planar(f"{args.params} twin.{key}", getattr(p, key), StageError)
+        unknown = sorted(set(getattr(p, key)) - set(registry.PLANAR))
+        if unknown:
+            raise StageError(f"params.yaml twin.{key}: unknown task(s) {unknown}; the tasks are "
+                             f"{list(registry.PLANAR)}")
     jobs = [SeedJob(task, seed, p, all_params.device, data_root=str(args.data_dir),
                                   models_dir=str(args.models / task / f"s{seed}")) for seed in p.seeds]
     tcfg = p.translator_for(task)

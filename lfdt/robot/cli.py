@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lfdt import inputs, twin
-from lfdt.errors import StageError
+from lfdt.errors import INTERRUPTED, StageError
 from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot.arm import (
     ArmNotResponding,
@@ -40,7 +40,7 @@ from lfdt.tasks import registry
 
 EXIT_FAILED = 2
 """A refused command or an arm that does not answer (the same code argparse uses for bad arguments)."""
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = INTERRUPTED
 """Ctrl-C (128 + SIGINT), as shells report it."""
 TASKS = registry.PLANAR
 

@@ -13,7 +13,6 @@ up here lists that task's module in its dvc.yaml deps).
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # only for the hints: importing the registry imports no task and nothing of one
@@ -30,14 +29,6 @@ SIMULATED_ONLY: tuple[str, ...] = ("box_push",)
 """Tasks with no real-robot counterpart (arms with joints and torque commands, not a plane)."""
 PLANAR: tuple[str, ...] = tuple(n for n in TASKS if n not in SIMULATED_ONLY)
 """The real-robot tasks (:class:`lfdt.tasks.base.PlanarTask`): those the twin, the rig and the robot CLI run."""
-
-
-def check_planar(where: str, names: Iterable[str], error: type[Exception] = ValueError) -> None:
-    """``error`` naming ``where`` (a params file and key) if ``names`` holds a task that is not a real-robot one
-    (:data:`PLANAR`): the twin stages' and preflight's check of ``twin.tasks`` and its per-task sections."""
-    unknown = sorted(set(names) - set(PLANAR))
-    if unknown:
-        raise error(f"{where}: unknown task(s) {unknown}; the tasks are {list(PLANAR)}")
 
 
 def get(name: str) -> Task:
