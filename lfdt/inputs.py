@@ -344,18 +344,20 @@ def sqlite_answers(path: str | Path, what: str, thorough: bool = False, timeout_
         con.close()
 
 
-def one_line_errors(body: Callable[[], int], interrupted: str) -> int:
-    """Run a command line's ``body`` (its exit code): a :class:`StageError` or an OSError (a full disk, no
-    permission: :func:`os_error_message`) is one line and exit 2, Ctrl-C one line saying ``interrupted``
-    (what is left, how to go on) and :data:`lfdt.errors.INTERRUPTED`; anything else is a bug and raises."""
+def one_line_errors(body: Callable[[], int], interrupted: str,
+                    refused: tuple[type[Exception], ...] = ()) -> int:
+    """Run a command line's ``body`` (its exit code): a :class:`StageError`, one of ``refused`` (e.g. a params
+    problem) or an OSError (a full disk, no permission: :func:`os_error_message`, with any notes the code added) is
+    one line and exit 2, Ctrl-C one line saying ``interrupted`` (what is left, how to go on) and
+    :data:`lfdt.errors.INTERRUPTED`; anything else is a bug and raises."""
     try:
         return body()
-    except StageError as err:
+    except (StageError, *refused) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"error: interrupted (Ctrl-C): {interrupted}", file=sys.stderr)
         return errors.INTERRUPTED
     except OSError as err:
-        print(f"error: {os_error_message(err)}", file=sys.stderr)
+        print(f"error: {'; '.join([os_error_message(err), *getattr(err, '__notes__', [])])}", file=sys.stderr)
         return 2

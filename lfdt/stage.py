@@ -26,42 +26,32 @@ def params(path: str | Path = "params.yaml") -> Params:
     return load_params(path)
 
 
-def describe_os_error(err: OSError) -> str:
-    """An OSError as one line that names its file where the OS gave one (``{path}: No space left on device``)."""
-    if err.filename is None:
-        return str(err)
-    files = f"{err.filename} -> {err.filename2}" if err.filename2 is not None else str(err.filename)
-    return f"{files}: {err.strerror or err}"
-
-
 INTERRUPTED = errors.INTERRUPTED
 """Exit code of a stage stopped by Ctrl-C (128 + SIGINT), as a shell reports it."""
 
 
 def main(fn: Callable[[], None]) -> None:
     """Run a stage's main; a params problem or a :class:`~lfdt.errors.StageError` (a wrong data file, an unreachable
-    tracking server, a diverged training) exits 2 with its message, as does an OSError (a missing input, a full disk:
-    :func:`describe_os_error`); Ctrl-C exits :data:`INTERRUPTED` with one line; anything else raises (non-zero exit).
+    tracking server, a diverged training) exits 2 with its message, as does an OSError (a missing input, a full disk,
+    named by :func:`lfdt.inputs.os_error_message`); Ctrl-C exits :data:`INTERRUPTED` with one line; anything else
+    raises (non-zero exit): :func:`lfdt.inputs.one_line_errors`.
 
     The stage ends within a second of the `dvc repro` that started it (:func:`lfdt.lifeline.watch`; its workers end
     with it), and holds a lock on its command line in this workspace while it runs, so that a rerun never writes
     the same outputs beside a stage still running."""
-    from lfdt import lifeline
+    from lfdt import inputs, lifeline
 
     lifeline.watch()
-    try:
+
+    def body() -> int:
         with lifeline.stage_lock(f"{Path.cwd()}: {' '.join(sys.argv)}", lifeline.LOCK_DIR):
             fn()
-    except (ParamsError, StageError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        print("error: interrupted (Ctrl-C): the stage's outputs are incomplete; `dvc repro` reruns it",
-              file=sys.stderr)
-        sys.exit(INTERRUPTED)
-    except OSError as err:  # the environment, not the code: one line naming the file (a traceback says no more)
-        print(f"error: {describe_os_error(err)}", file=sys.stderr)
-        sys.exit(2)
+        return 0
+
+    code = inputs.one_line_errors(body, "the stage's outputs are incomplete; `dvc repro` reruns it",
+                                  refused=(ParamsError,))
+    if code:
+        sys.exit(code)
 
 
 def write_json(path: str | Path, obj: Any) -> Path:

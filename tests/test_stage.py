@@ -165,3 +165,39 @@ def test_a_stage_refuses_a_missing_path_argument(monkeypatch, capsys):
     assert err.value.code == 2
     assert "the following arguments are required: --out-dir" in capsys.readouterr().err
     assert ap.parse_args(["--out-dir", "data/random"]).out_dir == Path("data/random")
+
+
+def _noted(err: OSError, note: str) -> OSError:
+    err.add_note(note)
+    return err
+
+
+def test_stage_main_ends_a_params_problem_a_full_disk_or_ctrl_c_in_one_line(tmp_path, monkeypatch, capsys):
+    """Every stage runs in lfdt.stage.main: what comes from outside the code is one line on stderr and an exit code
+    (2, or 130 for Ctrl-C), never a traceback; the OS's reason without its ``[Errno N]``, the file where it named one,
+    and what the code added to the error (its notes)."""
+    import pytest
+
+    from lfdt.config import ParamsError
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("lfdt.lifeline.LOCK_DIR", tmp_path / "locks")
+    cases = [
+        (ParamsError("params.yaml: bc.iterations: required"), 2, "error: params.yaml: bc.iterations: required"),
+        (OSError(28, "No space left on device", "out.json"), 2, "error: out.json: No space left on device"),
+        (OSError(28, "No space left on device"), 2, "error: No space left on device"),
+        (_noted(OSError(13, "Permission denied", "m.pt"), "the policy's weights"), 2,
+         "error: m.pt: Permission denied; the policy's weights"),
+        (KeyboardInterrupt(), 130,
+         "error: interrupted (Ctrl-C): the stage's outputs are incomplete; `dvc repro` reruns it"),
+    ]
+    for exc, code, line in cases:
+        def fail(exc: BaseException = exc) -> None:
+            raise exc
+
+        with pytest.raises(SystemExit) as stop:
+            stage.main(fail)
+        assert stop.value.code == code, (exc, stop.value.code)
+        assert capsys.readouterr().err == line + "\n", exc
+    stage.main(lambda: None)  # a stage that ends well returns
+    assert capsys.readouterr().err == ""
