@@ -152,9 +152,13 @@ def translator_diagnostics(root: Path) -> str:
     return "\n".join(lines)
 
 
+WORKLOADS_PINNED = ("translator", "bc", "sac", "dynamics")
+"""benchmarks/pin_cost.py's workloads, in the order of the table."""
+
+
 def benchmarks(root: Path) -> str:
-    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json, worker_start.json,
-    optimizer_start.json)."""
+    """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json and pin_cost_*.json of other
+    CPUs, worker_start.json, optimizer_start.json)."""
     res = root / "benchmarks" / "results"
     lines = ["| benchmark | ours | baseline | ratio | goal |", "| --- | --- | --- | --- | --- |"]
     st = _read_json(res / "stack_throughput.json")
@@ -163,11 +167,19 @@ def benchmarks(root: Path) -> str:
         lines.append(f"| {name}: {st['seeds']} seeds stacked vs one at a time ({r['unit']}/s, one core) | "
                      f"{r['per_s']['stacked']:.0f} | {r['per_s']['one_at_a_time']:.0f} | **{r['speedup']:.2f}** | 4 |")
     pc = _read_json(res / "pin_cost.json")
-    for name in ("translator", "bc", "sac", "dynamics"):
+    for name in WORKLOADS_PINNED:
         if name in pc:
             r = pc[name]
             lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` (/s) | {r['per_s']['pinned']:.0f} | "
                          f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
+    others = [_read_json(f) for f in sorted(res.glob("pin_cost_*.json"))]  # the same measure on other CPUs
+    for other in others:
+        for name in WORKLOADS_PINNED:
+            if name in other:
+                r = other[name]
+                lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` on {other['cpu_model']} "
+                             f"({other['cpu_isa'].upper()}, {other['date']}) (/s) | {r['per_s']['pinned']:.0f} | "
+                             f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
     ws = _read_json(res / "worker_start.json")
     med = ws["median"]
     lines.append(f"| a stage's two workers: spawn vs forkserver, whole stage process (s, wall; lower is better) | "
@@ -183,8 +195,9 @@ def benchmarks(root: Path) -> str:
     lines.append(f"| a training process to its first optimizer step: torch's compiler imported (as torch's optimizer "
                  f"wrapping did) vs not (s, CPU; lower is better) | {med['without_compiler']['cpu_s']:.2f} | "
                  f"{med['with_compiler']['cpu_s']:.2f} | **{os_['ratio_cpu_with_over_without']:.2f}** | |")
-    lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']}, "
-              f"{pc['date']}, medians of {pc['repeats']}. Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
+    lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']} "
+              f"({pc['cpu_isa'].upper()}), {pc['date']}, medians of {pc['repeats']}; on other CPUs where named. "
+              f"Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
               f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's time / forkserver's. "
               f"Optimizer start: {os_['cpu_model']}, {os_['date']}, medians of {os_['repeats']} processes each way; "
               f"ratio = with the compiler / without."]
