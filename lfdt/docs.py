@@ -152,10 +152,6 @@ def translator_diagnostics(root: Path) -> str:
     return "\n".join(lines)
 
 
-WORKLOADS_PINNED = ("translator", "bc", "sac", "dynamics")
-"""benchmarks/pin_cost.py's workloads, in the order of the table."""
-
-
 def benchmarks(root: Path) -> str:
     """Speed ratios from benchmarks/results/ (stack_throughput.json, pin_cost.json and pin_cost_*.json of other
     CPUs, worker_start.json, optimizer_start.json)."""
@@ -167,18 +163,12 @@ def benchmarks(root: Path) -> str:
         lines.append(f"| {name}: {st['seeds']} seeds stacked vs one at a time ({r['unit']}/s, one core) | "
                      f"{r['per_s']['stacked']:.0f} | {r['per_s']['one_at_a_time']:.0f} | **{r['speedup']:.2f}** | 4 |")
     pc = _read_json(res / "pin_cost.json")
-    for name in WORKLOADS_PINNED:
-        if name in pc:
-            r = pc[name]
-            lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` (/s) | {r['per_s']['pinned']:.0f} | "
-                         f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
-    others = [_read_json(f) for f in sorted(res.glob("pin_cost_*.json"))]  # the same measure on other CPUs
-    for other in others:
-        for name in WORKLOADS_PINNED:
-            if name in other:
-                r = other[name]
-                lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native` on {other['cpu_model']} "
-                             f"({other['cpu_isa'].upper()}, {other['date']}) (/s) | {r['per_s']['pinned']:.0f} | "
+    # the same measure on other CPUs (pin_cost_*.json) after the main one, each row naming its CPU
+    for doc, where in [(pc, ""), *((o, f" on {o['cpu_model']} ({o['cpu_isa'].upper()}, {o['date']})")
+                                   for o in map(_read_json, sorted(res.glob("pin_cost_*.json"))))]:
+        for name, r in doc.items():  # benchmarks/pin_cost.py's workloads, in its order
+            if isinstance(r, dict) and "ratio_pinned_over_native" in r:
+                lines.append(f"| {name}: pinned vs `LFDT_NUMERICS=native`{where} (/s) | {r['per_s']['pinned']:.0f} | "
                              f"{r['per_s']['native']:.0f} | **{r['ratio_pinned_over_native']:.2f}** | |")
     ws = _read_json(res / "worker_start.json")
     med = ws["median"]

@@ -182,11 +182,11 @@ def output_folder(path: str | Path, what: str, expected: str = "", *,
 
 def os_error_message(err: OSError, what: str = "") -> str:
     """One line for an OSError that reached an entry point: the path (or ``what``, when the OS named none, as for a
-    failed write) and the OS's reason, without the ``[Errno N]`` prefix."""
+    failed write) and the OS's reason, without the ``[Errno N]`` prefix, then any notes the code added to it."""
     names = [str(n) for n in (err.filename, err.filename2) if n is not None]
     where = " -> ".join(names) or what
     reason = err.strerror or str(err)
-    return f"{where}: {reason}" if where else reason
+    return "; ".join([f"{where}: {reason}" if where else reason, *getattr(err, "__notes__", [])])
 
 
 def camera_device(index: int, what: str, *, error: type[InputError] = InputError) -> int:
@@ -347,7 +347,7 @@ def sqlite_answers(path: str | Path, what: str, thorough: bool = False, timeout_
 def one_line_errors(body: Callable[[], int], interrupted: str,
                     refused: tuple[type[Exception], ...] = ()) -> int:
     """Run a command line's ``body`` (its exit code): a :class:`StageError`, one of ``refused`` (e.g. a params
-    problem) or an OSError (a full disk, no permission: :func:`os_error_message`, with any notes the code added) is
+    problem) or an OSError (a full disk, no permission: :func:`os_error_message`) is
     one line and exit 2, Ctrl-C one line saying ``interrupted`` (what is left, how to go on) and
     :data:`lfdt.errors.INTERRUPTED`; anything else is a bug and raises."""
     try:
@@ -359,5 +359,5 @@ def one_line_errors(body: Callable[[], int], interrupted: str,
         print(f"error: interrupted (Ctrl-C): {interrupted}", file=sys.stderr)
         return errors.INTERRUPTED
     except OSError as err:
-        print(f"error: {'; '.join([os_error_message(err), *getattr(err, '__notes__', [])])}", file=sys.stderr)
+        print(f"error: {os_error_message(err)}", file=sys.stderr)
         return 2

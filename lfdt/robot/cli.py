@@ -635,7 +635,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               "offered)", file=sys.stderr)
         return EXIT_FAILED
     except OSError as e:  # a full disk, a folder where a file belongs, no permission: the OS names the path
-        print(f"error: {'; '.join([inputs.os_error_message(e), *getattr(e, '__notes__', [])])}", file=sys.stderr)
+        print(f"error: {inputs.os_error_message(e)}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
