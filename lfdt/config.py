@@ -593,8 +593,8 @@ class TwinParams(Strict):
     def _learned_kinematics(self) -> TwinParams:
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"seeds has duplicates: {self.seeds}")
-        # names are checked by the twin stages against lfdt.tasks.registry.PLANAR (importing a task here would make
-        # every stage depend on the twin's task modules)
+        # names are checked against lfdt.tasks.registry.PLANAR by the preflight stage and the twin stages (checking
+        # them here would make every stage depend on the twin's task modules)
         if len(set(self.tasks)) != len(self.tasks):
             raise ValueError(f"tasks has duplicates: {self.tasks}")
         for task in [None, *self.task_translator]:

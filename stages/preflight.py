@@ -12,6 +12,7 @@ from lfdt import mlflow_runs, parallel, stage
 from lfdt.config import Params
 from lfdt.files import write_atomic
 from lfdt.reach import redact
+from lfdt.tasks import registry
 
 PASSED = "params and tracking store checked (stages/preflight.py)\n"
 """The whole of the output: constant, so that no stage downstream reruns because this one did."""
@@ -19,9 +20,11 @@ PASSED = "params and tracking store checked (stages/preflight.py)\n"
 
 def check_runnable(p: Params) -> None:
     """What a stage would refuse in params that lfdt.config accepts (every value valid, every key present): the
-    torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`). The
-    twin's task names are the twin stages' own check: looking them up here would make every stage of Table I
-    depend on the task registry."""
+    torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`), and a
+    twin task name the registry does not know (the twin stages' own check). So this stage lists every task's code
+    among its deps (tests/test_dvc_deps.py), and reruns, in seconds, when one changes; its output stays the same
+    bytes, so no stage below reruns for it."""
+    registry.check_twin_names(p.twin)
     if p.device != "cpu":  # torch loads in seconds: only when there is a device to look for
         from lfdt.nets import torch_device
 

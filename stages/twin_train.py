@@ -4,7 +4,6 @@ by side."""
 import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before numpy, torch or mujoco load)
 
 from lfdt import parallel, stage
-from lfdt.errors import StageError
 from lfdt.nets import torch_device
 from lfdt.tasks import registry
 from lfdt.twin import train as twin_train
@@ -17,11 +16,7 @@ def run() -> None:
         "reports": "where the report <task>_train.json goes"})
     task, p = args.task, all_params.twin
     torch_device(all_params.device)  # before any job starts
-    for key in ("task_translator", "task_bc"):
-        unknown = sorted(set(getattr(p, key)) - set(registry.PLANAR))
-        if unknown:
-            raise StageError(f"params.yaml twin.{key}: unknown task(s) {unknown}; the tasks are "
-                             f"{list(registry.PLANAR)}")
+    registry.check_twin_names(p)
     jobs = [SeedJob(task, seed, p, all_params.device, data_root=str(args.data_dir),
                                   models_dir=str(args.models / task / f"s{seed}")) for seed in p.seeds]
     tcfg = p.translator_for(task)

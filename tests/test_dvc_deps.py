@@ -217,8 +217,9 @@ def test_a_stage_that_looks_its_task_up_depends_on_that_task_alone():
     assert extra_deps(cmd, [*deps, "lfdt/tasks/peg_insertion.py"], item) == ["lfdt/tasks/peg_insertion.py"]
 
 
-EVERY_TASK_STAGES = ("register_policies",)
-"""Stages that serve Table I's task and the twin's alike (they look every task up in the registry)."""
+EVERY_TASK_STAGES = ("preflight", "register_policies")
+"""Stages that serve Table I's task and the twin's alike (they look every task up in the registry; preflight checks
+the twin's task names before any stage runs)."""
 
 
 def test_table1_stages_depend_on_no_other_task():

@@ -38,8 +38,9 @@ def _set(section: str, **values) -> Callable[[dict], None]:
      "(accepted: an integer > 0 and <= 2147483647)", []),
     (lambda params: params.update(device="cuda"), None, "device = 'cuda', but torch", ["-f"]),
     (lambda params: params["bc"].pop("iterations"), None, "lacks bc.iterations (default 8000)", []),
+    (_set("twin", tasks=["block_push", "peg_insert"]), None, "twin.tasks: unknown task(s) ['peg_insert']", []),
 ], ids=["bad-param", "bad-tracking-uri", "missing-section", "absurd-size", "forced-repro-missing-device",
-        "deleted-key"])
+        "deleted-key", "unknown-twin-task"])
 def test_a_bad_input_stops_repro_before_any_output_is_removed(smoke_project, monkeypatch, change, uri, says, args):
     """DVC removes a stage's outputs before it runs the stage (`dvc repro -f`: every stage's): the preflight stage,
     upstream of every stage that reads params, fails first on a bad or missing params value, a torch device this

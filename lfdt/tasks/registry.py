@@ -15,7 +15,10 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
+from lfdt.errors import StageError
+
 if TYPE_CHECKING:  # only for the hints: importing the registry imports no task and nothing of one
+    from lfdt.config import TwinParams
     from lfdt.tasks.base import Task
 
 TASKS: dict[str, str] = {
@@ -39,3 +42,14 @@ def get(name: str) -> Task:
         raise ValueError(f"unknown task {name!r}; expected one of {tuple(TASKS)}") from None
     module, attribute = entry.split(":")
     return getattr(importlib.import_module(module), attribute)
+
+
+def check_twin_names(twin: TwinParams) -> None:
+    """Every task name ``twin`` (params.yaml's twin section) gives, in ``tasks``, ``task_translator`` or ``task_bc``,
+    is a real-robot task (:data:`PLANAR`); a :class:`lfdt.errors.StageError` naming the key and the known names
+    otherwise. Checked by the preflight stage before any stage runs, and by the twin stages themselves."""
+    for key in ("tasks", "task_translator", "task_bc"):
+        unknown = sorted(set(getattr(twin, key)) - set(PLANAR))
+        if unknown:
+            raise StageError(f"params.yaml twin.{key}: unknown task(s) {unknown}; the real-robot tasks are "
+                             f"{list(PLANAR)}")
