@@ -672,18 +672,21 @@ def _accepted(field: FieldInfo | None) -> str:
 
 
 def _format_errors(err: ValidationError) -> str:
-    lines = []
+    """Every problem of a validation, in one line (a stage's error is one line): ``key = value: what``, joined by
+    '; '."""
+    problems = []
     for e in err.errors():
         key = ".".join(str(p) for p in e["loc"] if p != "") or "(top level)"
         value = e.get("input")
-        msg = e["msg"].removeprefix("Value error, ")
+        msg = " ".join(e["msg"].removeprefix("Value error, ").split())
         if isinstance(value, dict):  # a whole section: the message says what is wrong in it
-            lines.append(f"  {key}: {msg}")
+            problems.append(f"{key}: {msg}")
             continue
-        shown = repr(value)
-        lines.append(f"  {key} = {shown if len(shown) <= 80 else shown[:77] + '...'}: {msg}"
-                     f"{_accepted(_field(e['loc']))}")
-    return "invalid params:\n" + "\n".join(lines)
+        shown = " ".join(repr(value).split())
+        problems.append(f"{key} = {shown if len(shown) <= 80 else shown[:77] + '...'}: {msg}"
+                        f"{_accepted(_field(e['loc']))}")
+    head = "invalid params: " if len(problems) == 1 else f"invalid params ({len(problems)} problems): "
+    return head + "; ".join(problems)
 
 
 def missing_keys(raw: dict, model: type[BaseModel] = Params, prefix: str = "") -> list[str]:
@@ -733,24 +736,63 @@ def validate_params(raw: dict | None) -> Params:
 
 
 def load_params(path: str | Path = "params.yaml") -> Params:
-    """Read and validate params.yaml: every value valid and every key present (:func:`require_complete`)."""
+    """Read and validate params.yaml: every value valid and every key present (:func:`require_complete`). A file
+    that is missing, not a readable file, not UTF-8 or not YAML, or that writes a key twice, is a ParamsError naming
+    it."""
+    from lfdt import inputs
+    from lfdt.errors import InputError
+
     path = Path(path)
-    if not path.exists():
-        raise ParamsError(f"params file {path} does not exist")
     try:
-        raw = read_yaml(path)
+        text = inputs.read_text(path, "params file", "a UTF-8 YAML mapping like the repository's params.yaml")
+    except InputError as err:
+        raise ParamsError(str(err)) from None
+    try:
+        raw = parse_yaml(text)
     except yaml.YAMLError as err:
-        raise ParamsError(f"{path} is not valid YAML: {err}") from None
+        raise ParamsError(f"{path} is not valid YAML: {yaml_problem(err)}") from None
     params = validate_params(raw)  # first: a wrong value or an unknown key is named before a missing one
     require_complete(raw, path)
     return params
 
 
-def read_yaml(path: str | Path) -> dict:
-    """Read a YAML file into a dict (empty file -> {})."""
-    with open(path) as fh:
-        data = yaml.safe_load(fh)
-    return data or {}
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a key written twice in one mapping (plain YAML keeps the last one without a
+    word, so a value added below an existing key would silently replace it)."""
+
+
+def _unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    first: dict[Any, int] = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        try:
+            seen = key in first
+        except TypeError:  # an unhashable key: the safe loader's own error names it
+            continue
+        if seen:
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping", node.start_mark,
+                f"found the key {key!r} a second time (first on line {first[key]})", key_node.start_mark)
+        first[key] = key_node.start_mark.line + 1
+    return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+
+
+def yaml_problem(err: yaml.YAMLError) -> str:
+    """A YAML error in one line: where (line and column of the text) and what."""
+    if not isinstance(err, yaml.MarkedYAMLError):
+        return " ".join(str(err).split())
+    mark = err.problem_mark or err.context_mark
+    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+    what = "; ".join(part for part in (err.problem, err.context) if part)
+    return where + " ".join(what.split())
+
+
+def parse_yaml(text: str) -> Any:
+    """Params YAML text as Python objects (empty -> {}); a key written twice in one mapping is a ``yaml.YAMLError``."""
+    return yaml.load(text, Loader=_UniqueKeyLoader) or {}  # noqa: S506 (a SafeLoader subclass)
 
 
 def _yaml_scalar(v: Any) -> str:

@@ -11,7 +11,7 @@ import numpy as np
 from lfdt import data, layout
 from lfdt.config import TwinParams
 from lfdt.tasks import registry
-from lfdt.twin.common import SeedJob, recordings, twin_schema
+from lfdt.twin.common import SeedJob, check_real_recording, recordings, twin_schema
 
 
 def record_random(task: str, domain: str, samples: int, episode_steps: int, seed: int, out_dir,
@@ -92,12 +92,7 @@ def collect_seed(task: str, p: TwinParams, seed: int, root: str | Path) -> dict:
     for name, path in out.items():
         shutil.rmtree(path, ignore_errors=True)
         if p.backend == "real":
-            src = Path(p.real_dir) / task / name
-            if not any(src.glob("episode_*.parquet")):
-                command = "record-random" if name.startswith("random") else "record-demos"
-                raise FileNotFoundError(f"backend 'real': no recording {src}; record it with "
-                                        f"`python -m lfdt.robot {command}`")
-            shutil.copytree(src, path)
+            shutil.copytree(check_real_recording(p, task, name), path)
         elif name.startswith("random"):
             record_random(task, name.split("_")[1], p.random_samples, p.random_episode_steps, seed, path,
                           hold_max=p.random_hold_max)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from lfdt import data, layout
 from lfdt.config import TwinParams
+from lfdt.errors import StageError
 from lfdt.tasks import registry
 
 
@@ -35,11 +36,32 @@ def twin_schema(task: str, domain: str, kind: str, metadata: dict):
         "kind": kind, "task": task, "domain": domain, "layout": tl.describe(), **metadata})
 
 
+RECORDING_NAMES: tuple[str, ...] = (*(f"random_{d}" for d in layout.DOMAINS), *(f"demos_{p}" for p in layout.PAIRINGS))
+"""The recordings of a task, one folder each."""
+
+
 def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
     """The recording directories of a task's run with one seed under ``root`` (the twin's data folder)."""
     base = Path(root) / task / f"s{seed}"
-    names = [f"random_{d}" for d in layout.DOMAINS] + [f"demos_{p}" for p in layout.PAIRINGS]
-    return {n: base / n for n in names}
+    return {n: base / n for n in RECORDING_NAMES}
+
+
+def check_real_recording(p: TwinParams, task: str, name: str) -> Path:
+    """The folder of recording ``name`` of ``task`` made on the robots (backend 'real'); a StageError naming
+    ``twin.real_dir``'s folder and the command that records it when it holds no episode."""
+    src = Path(p.real_dir) / task / name
+    if not any(src.glob("episode_*.parquet")):
+        command = "record-random" if name.startswith("random") else "record-demos"
+        raise StageError(f"params.yaml twin.backend is 'real', but {src} holds no recording (episode_*.parquet; "
+                         f"twin.real_dir = {p.real_dir!r}); record it with `python -m lfdt.robot {command}`")
+    return src
+
+
+def check_real_recordings(p: TwinParams) -> None:
+    """Every recording of every task of ``twin.tasks`` is there (backend 'real'; the preflight stage's check)."""
+    for task in p.tasks:
+        for name in RECORDING_NAMES:
+            check_real_recording(p, task, name)
 
 
 @dataclass(frozen=True)
