@@ -243,10 +243,14 @@ def http_answers(url: str, what: str, timeout_s: float, probe_path: str = "", hi
     import urllib.request
     from urllib.parse import urlsplit, urlunsplit
 
-    parts = urlsplit(url)
+    tail = f"; {hint}" if hint else ""
+    try:
+        parts = urlsplit(url)
+        parts.port  # noqa: B018 - raises for a port that is no number from 0 to 65535
+    except ValueError as err:
+        raise error(f"{what}: not a URL that can be read ({err}){tail}") from None
     netloc = parts.netloc.rsplit("@", 1)[-1]  # user:password@ is the client's basic auth, not the address
     probe = urlunsplit((parts.scheme, netloc, parts.path.rstrip("/") + probe_path, "", ""))
-    tail = f"; {hint}" if hint else ""
     try:
         with urllib.request.urlopen(probe, timeout=timeout_s) as resp:
             return resp.status

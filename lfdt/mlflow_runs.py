@@ -19,6 +19,7 @@ import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from lfdt import inputs, lifeline, numerics
 from lfdt.errors import InputError, StageError
@@ -106,6 +107,11 @@ def check_tracking_uri(uri: str, timeout: float = PROBE_TIMEOUT_S, thorough: boo
     * ``http(s)://``: the server answers on /health within ``timeout`` seconds, and not with 5xx;
     * anything else (``file:`` stores, ``ftp://``, a mistyped scheme): refused, naming the schemes that work.
     """
+    try:
+        urlsplit(uri).port  # noqa: B018 - what every client does first, so a URL it cannot split is named here
+    except ValueError as err:
+        raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={redact(uri)}: not a URL that can be read ({err}); e.g. "
+                                  "sqlite:////absolute/path/mlflow.db or http://host:port") from None
     if uri.lower() in DATABRICKS:
         return  # MLflow's own spelling of a Databricks workspace (its CLI profile): no address to check here
     scheme = _scheme(uri)

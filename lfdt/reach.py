@@ -3,6 +3,7 @@ that a wrong address ends in one line that names it instead of minutes of a clie
 
 from __future__ import annotations
 
+import re
 import socket
 from urllib.parse import urlsplit
 
@@ -23,10 +24,13 @@ class Unreachable(StageError):
 
 def redact(address: str) -> str:
     """The address with any password replaced by ``***`` (addresses go into error messages and logs)."""
-    parts = urlsplit(address)
-    if parts.password is None:
+    try:
+        password = urlsplit(address).password
+    except ValueError:  # not a URL Python can split (an unclosed [IPv6]): hide whatever stands between ':' and '@'
+        return re.sub(r"(://[^/@:]*:)[^/@]*@", r"\1***@", address, count=1)
+    if password is None:
         return address
-    return address.replace(f":{parts.password}@", ":***@", 1)
+    return address.replace(f":{password}@", ":***@", 1)
 
 
 def host_port(address: str, default_port: int | None = None) -> tuple[str, int]:
