@@ -81,6 +81,17 @@ def with_rig(calibration: bytes | None, source: int | str = "video.avi",
     return build
 
 
+def with_rig_text(old: str, new: str) -> Callable[[Path], list[str]]:
+    """record-random with a rig config (good camera files) whose JSON text has its first ``old`` replaced by ``new``."""
+    def build(tmp: Path) -> list[str]:
+        path = rig(tmp, json.dumps(GOOD_CALIBRATION).encode())
+        text = path.read_text()
+        assert old in text, old
+        path.write_text(text.replace(old, new, 1))
+        return record(tmp, "--rig", str(path))
+    return build
+
+
 def deploy(log: bytes | None = None, log_path: str = "deploy_lfdt.csv", sidecar: bool = True,
            trials: int = 1) -> Callable[[Path], list[str]]:
     """``deploy --sim`` of tiny policies, appending to ``log_path`` (under tmp unless absolute) holding ``log``."""
@@ -185,6 +196,15 @@ CASES = [
          (CALIBRATION, "camera_matrix: 4 numbers, not 3x3")),
     Case("calibration-a-folder", lambda tmp: (tmp / "calib.json").mkdir() or with_rig(None)(tmp),
          (CALIBRATION, "is a folder, not a file")),
+    # rig JSON: what JSON parsers and a loose schema let through
+    Case("rig-infinite-step", with_rig_text('"max_step_deg": 15.0', '"max_step_deg": Infinity'),
+         ("{tmp}/rig.json: arms.r1.max_step_deg: Input should be a finite number",)),
+    Case("rig-key-twice", with_rig_text('"control_period_s": 0.1', '"control_period_s": 0.1, "control_period_s": 5'),
+         ("{tmp}/rig.json: the key 'control_period_s' appears twice",)),
+    Case("rig-empty-port", with_rig_text('"port": "/dev/ttyUSB0"', '"port": ""'),
+         ("{tmp}/rig.json: arms.r1.port: String should have at least 1 character",)),
+    Case("rig-one-port-two-arms", with_rig_text('"/dev/ttyUSB1"', '"/dev/ttyUSB0"'),
+         ("{tmp}/rig.json: arms.r1 and arms.r2 are both connected at '/dev/ttyUSB0'",)),
     Case("camera-index-absent", with_rig(json.dumps(GOOD_CALIBRATION).encode(), source=97),
          ("camera.source 97: no camera /dev/video97",)),
     Case("camera-video-missing", with_rig(json.dumps(GOOD_CALIBRATION).encode(), source="gone.avi"),

@@ -301,7 +301,9 @@ def _config(camera_files, ports: dict[str, str], **top):
     video, calib = camera_files
     cfg = example_rig_config("block_push")
     for name in ("r1", "r2"):
-        cfg["arms"][name]["port"] = ports.get(name, "/dev/null")
+        # an arm the test does not connect (a SimArm stands in) still has a port of its own: one port for two arms
+        # is refused
+        cfg["arms"][name]["port"] = ports.get(name, f"/dev/unused-{name}")
     cfg["camera"].update({"source": str(video), "calibration": str(calib), "table_tag_size_m": TABLE_SIZE,
                           "tag_size_m": TAG, "table_tag_pose": dict(zip(("x_mm", "y_mm", "z_mm"), TABLE_AT_MM))})
     cfg.update({"control_period_s": 0.05, "max_lost_frames": 2, "reset_settle_s": 1.0, **top})

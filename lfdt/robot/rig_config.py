@@ -29,9 +29,10 @@ class RigConfigError(InputError, ValueError):
 
 
 class _Model(BaseModel):
-    # strict: a quoted number or a list where an object belongs is an error, not silently converted
+    # strict: a quoted number or a list where an object belongs is an error, not silently converted; no NaN or
+    # infinity (an infinite max_step_deg would be no limit at all)
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True, use_attribute_docstrings=True,
-                              populate_by_name=True)
+                              populate_by_name=True, allow_inf_nan=False)
 
 
 def rotation_rpy(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
@@ -67,9 +68,9 @@ Vec3 = tuple[float, float, float]
 class MyCobotConfig(_Model):
     """One myCobot 280: where it is connected, where its base stands, and what the safety layer allows."""
 
-    port: str | None = None
+    port: Annotated[str, Field(min_length=1)] | None = None
     """Serial port (e.g. /dev/ttyUSB0); give exactly one of port and host."""
-    host: str | None = None
+    host: Annotated[str, Field(min_length=1)] | None = None
     """IP address of the arm's TCP server (myCobot 280 Pi / JN)."""
     netport: Annotated[int, Field(ge=1, le=65535)] = 9000
     """TCP port of the arm's server."""
@@ -158,7 +159,14 @@ class RigConfig(_Model):
                              f"of {known}")
         plane = kinematics.TASK_PLANES[self.task]
         f = plane.fixed_axis
+        connections: dict[str, str] = {}
         for name, arm in self.arms.items():
+            # two arms on one connection would send both arms' commands to one of them
+            where = arm.port if arm.port is not None else f"{arm.host}:{arm.netport}"
+            if where in connections:
+                raise ValueError(f"arms.{connections[where]} and arms.{name} are both connected at {where!r}; each "
+                                 "arm has its own serial port or TCP server")
+            connections[where] = name
             r = arm.base.matrix()[:3, :3]
             # the arm's task plane must cross the world's task plane at a usable angle to project targets onto it
             if abs(r[f, f]) < 0.5:
@@ -226,9 +234,21 @@ def _format_errors(err: ValidationError) -> str:
 def parse_rig_config(text: str, where: str = "rig config") -> RigConfig:
     """Validate a rig configuration from JSON text; RigConfigError names ``where`` and each bad key."""
     try:
-        return RigConfig.model_validate_json(text)
+        cfg = RigConfig.model_validate_json(text)
     except ValidationError as e:
         raise RigConfigError(f"{where}: {_format_errors(e)}") from None
+    json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, where))  # valid JSON by now
+    return cfg
+
+
+def _unique_keys(pairs: list[tuple[str, Any]], where: str) -> dict[str, Any]:
+    """A JSON object's keys, refusing one written twice (JSON parsers keep the last one without a word)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise RigConfigError(f"{where}: the key {key!r} appears twice in one object; keep one")
+        out[key] = value
+    return out
 
 
 def load_rig_config(path: str | Path) -> RigConfig:
