@@ -101,6 +101,9 @@ def json_object(path: str | Path, what: str, expected: str, parse: Callable[[dic
                     expected) from None
     if not isinstance(obj, dict):
         raise _fail(error, what, path, f"holds a JSON {_json_type(obj)}, not an object", expected)
+    twice = duplicate_json_key(text)
+    if twice is not None:
+        raise _fail(error, what, path, f"has the key {twice!r} twice in one object", expected)
     if parse is None:
         return obj
     try:
@@ -110,6 +113,29 @@ def json_object(path: str | Path, what: str, expected: str, parse: Callable[[dic
     except (TypeError, ValueError, IndexError) as err:
         raise _fail(error, what, path, str(err).splitlines()[0] if str(err) else type(err).__name__,
                     expected) from None
+
+
+class _Twice(Exception):
+    pass
+
+
+def _no_key_twice(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _Twice(key)
+        out[key] = value
+    return out
+
+
+def duplicate_json_key(text: str) -> str | None:
+    """The first key written twice in one object of the JSON ``text`` (which parses), or None. JSON parsers keep
+    the last one without a word, so a value added above an existing key would silently lose."""
+    try:
+        json.loads(text, object_pairs_hook=_no_key_twice)
+    except _Twice as twice:
+        return twice.args[0]
+    return None
 
 
 def _json_type(obj: Any) -> str:

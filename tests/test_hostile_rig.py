@@ -200,7 +200,10 @@ CASES = [
     Case("rig-infinite-step", with_rig_text('"max_step_deg": 15.0', '"max_step_deg": Infinity'),
          ("{tmp}/rig.json: arms.r1.max_step_deg: Input should be a finite number",)),
     Case("rig-key-twice", with_rig_text('"control_period_s": 0.1', '"control_period_s": 0.1, "control_period_s": 5'),
-         ("{tmp}/rig.json: the key 'control_period_s' appears twice",)),
+         ("{tmp}/rig.json: has the key 'control_period_s' twice",)),
+    Case("calibration-key-twice", with_rig(json.dumps(GOOD_CALIBRATION).replace(
+        '"image_size"', '"image_size": [1, 1], "image_size"').encode()),
+         (CALIBRATION, "has the key 'image_size' twice")),
     Case("rig-empty-port", with_rig_text('"port": "/dev/ttyUSB0"', '"port": ""'),
          ("{tmp}/rig.json: arms.r1.port: String should have at least 1 character",)),
     Case("rig-one-port-two-arms", with_rig_text('"/dev/ttyUSB1"', '"/dev/ttyUSB0"'),

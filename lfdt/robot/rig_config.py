@@ -237,18 +237,10 @@ def parse_rig_config(text: str, where: str = "rig config") -> RigConfig:
         cfg = RigConfig.model_validate_json(text)
     except ValidationError as e:
         raise RigConfigError(f"{where}: {_format_errors(e)}") from None
-    json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, where))  # valid JSON by now
+    twice = inputs.duplicate_json_key(text)  # valid JSON by now
+    if twice is not None:
+        raise RigConfigError(f"{where}: has the key {twice!r} twice in one object; keep one")
     return cfg
-
-
-def _unique_keys(pairs: list[tuple[str, Any]], where: str) -> dict[str, Any]:
-    """A JSON object's keys, refusing one written twice (JSON parsers keep the last one without a word)."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise RigConfigError(f"{where}: the key {key!r} appears twice in one object; keep one")
-        out[key] = value
-    return out
 
 
 def load_rig_config(path: str | Path) -> RigConfig:
