@@ -234,6 +234,12 @@ class BCPolicy:
         y_cols = tl.state_columns("Y")
         a_cols = tl.action_columns("Y")
         self._n_actions = len(a_cols)
+        unknown = [c for m in members for c in m.in_columns if c not in y_cols] + \
+            [c for m in members for c in m.out_columns if c not in a_cols]
+        if unknown:
+            shown = ", ".join(unknown[:4]) + (", ..." if len(unknown) > 4 else "")
+            raise ValueError(f"the policy reads or writes columns that domain Y of this task does not have "
+                             f"({shown}): a policy of another task?")
         self._in = [np.array([y_cols.index(c) for c in m.in_columns]) for m in members]
         self._out = [np.array([a_cols.index(c) for c in m.out_columns]) for m in members]
         covered = np.concatenate(self._out)
@@ -267,7 +273,10 @@ class BCPolicy:
             members.append(load_state(m, pt))
         if not members:
             raise ModelFileError(f"no policy (*.pt) in {model_dir}")
-        return cls(members, tl, action_bounds), cfg
+        try:
+            return cls(members, tl, action_bounds), cfg
+        except ValueError as err:
+            raise ModelFileError(f"{model_dir}: {err}") from None
 
 
 class StackedPolicies:

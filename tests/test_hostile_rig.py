@@ -229,7 +229,14 @@ CASES = [
     Case("log-write-fails-mid-run", deploy(log=LOG.encode()),
          ("--log {tmp}/deploy_lfdt.csv: the outcome of trial 1", "No space left on device", "add the row '1,"),
          ran=1, patch=fail_writes),
+    Case("log-full-of-trials", deploy(log=("trial,success\r\n" + "".join(f"{i},True\r\n" for i in range(99_999))
+                                           ).encode(), trials=5),
+         ("--trials 5: --log {tmp}/deploy_lfdt.csv holds 99999 already", "at most 1 more")),
     # deploy: the policy's files
+    Case("policy-of-another-task", lambda tmp: [a if a != "block_push" else "peg_insertion"
+                                                for a in deploy(log=LOG.encode())(tmp)],
+         ("--models {tmp}/models: {tmp}/models/lfdt: the policy reads or writes columns that domain Y of this task "
+          "does not have",)),
     Case("policy-sidecar-missing", deploy(log=LOG.encode(), sidecar=False),
          ("--models {tmp}/models: {tmp}/models/lfdt/all.json is missing",)),
     # a folder expected, a file given

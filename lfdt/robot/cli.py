@@ -56,6 +56,28 @@ def positive_int(text: str) -> int:
     return value
 
 
+def episode_count(text: str) -> int:
+    """argparse type: a count of episodes, attempts or trials, each of which has its own start state among the
+    :data:`lfdt.seeding.MAX_EPISODES` of a seed (:func:`positive_int` at most that many)."""
+    from lfdt.seeding import MAX_EPISODES
+
+    value = positive_int(text)
+    if value > MAX_EPISODES:
+        raise argparse.ArgumentTypeError(f"{value} is more than the {MAX_EPISODES} start states a seed has")
+    return value
+
+
+def _check_room(first: int, count: int, option: str, where: str) -> None:
+    """Episodes ``first`` .. ``first + count - 1`` each have a start state (:data:`lfdt.seeding.MAX_EPISODES` per
+    seed); an InputError naming ``option`` and what ``where`` holds already otherwise, before anything moves."""
+    from lfdt.errors import InputError
+    from lfdt.seeding import MAX_EPISODES
+
+    if first + count > MAX_EPISODES:
+        raise InputError(f"{option} {count}: {where} holds {first} already, and a seed has {MAX_EPISODES} start "
+                         f"states; at most {max(MAX_EPISODES - first, 0)} more")
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0 (a distance, a duration)."""
     value = nonnegative_float(text)
@@ -375,7 +397,7 @@ def add_record_random_parser(subparsers) -> None:
                                           "and numbering continues.")
     add_rig_arguments(p)
     p.add_argument("--domain", required=True, choices=("Y", "R1H", "HR2"))
-    p.add_argument("--episodes", type=positive_int, required=True, metavar="N", help="episodes to record")
+    p.add_argument("--episodes", type=episode_count, required=True, metavar="N", help="episodes to record")
     p.add_argument("--steps", type=positive_int, required=True, metavar="T", help="control steps per episode")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
@@ -402,6 +424,7 @@ def run_record_random(args: argparse.Namespace) -> int:
     rig = _make_rig(args, task, config, args.domain, args.human, args.seed)
     meta = _metadata(args, config, seed=args.seed, steps=args.steps, reach=args.reach, hold_max=args.hold_max)
     rec = EpisodeRecorder(args.out, twin_schema(task, args.domain, "random", meta), rig.control_dt)
+    _check_room(rec.next_index(), args.episodes, "--episodes", f"--out {args.out}")
 
     def episode() -> bool:
         index = rec.start()
@@ -430,12 +453,12 @@ def add_record_demos_parser(subparsers) -> None:
                                           "the others dropped.")
     add_rig_arguments(p)
     p.add_argument("--pairing", required=True, choices=("R1H", "HR2"))
-    p.add_argument("--episodes", type=positive_int, required=True, metavar="N",
+    p.add_argument("--episodes", type=episode_count, required=True, metavar="N",
                    help="successful demonstrations to keep")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
     p.add_argument("--steps", type=positive_int, default=40, metavar="T",
                    help="longest episode, control steps (default: 40, the twin's episode)")
-    p.add_argument("--max-attempts", type=positive_int, metavar="M", help="give up after M attempts (default: 5 N)")
+    p.add_argument("--max-attempts", type=episode_count, metavar="M", help="give up after M attempts (default: 5 N)")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
     p.add_argument("--yes", action="store_true", help="robots: keep every episode, do not ask or wait for Enter")
     p.set_defaults(func=run_record_demos)
@@ -459,6 +482,8 @@ def run_record_demos(args: argparse.Namespace) -> int:
     rec = EpisodeRecorder(args.out, twin_schema(task, args.pairing, "demos", meta), rig.control_dt)
     goal_line = config.goal_line_m if config is not None and not args.sim else None
     attempts = {"n": 0, "first": rec.next_index()}
+    _check_room(attempts["first"], max_attempts, "--max-attempts" if args.max_attempts else "--episodes (5 N attempts)",
+                f"--out {args.out}")
 
     def episode() -> bool:
         if attempts["n"] >= max_attempts:
@@ -510,7 +535,7 @@ def add_deploy_parser(subparsers) -> None:
     p.add_argument("--models", required=True, metavar="DIR|URI",
                    help="trained models of one seed, e.g. models/twin/TASK/s0, or a registered policy, e.g. "
                         "models:/TASK.METHOD@seed3 (reports/models.csv lists them)")
-    p.add_argument("--trials", type=positive_int, required=True, metavar="N", help="trials to run")
+    p.add_argument("--trials", type=episode_count, required=True, metavar="N", help="trials to run")
     p.add_argument("--log", required=True, type=Path, metavar="CSV",
                    help="outcome log, e.g. data/real/TASK/deploy_METHOD.csv")
     p.add_argument("--steps", type=positive_int, default=40, metavar="T",
@@ -531,6 +556,7 @@ def run_deploy(args: argparse.Namespace) -> int:
 
     task, config = _rig_task(args)
     done = deploy_log.check_appendable(args.log, "--log")
+    _check_room(done, args.trials, "--trials", f"--log {args.log}")
     if policy_models.is_uri(args.models):
         from mlflow.exceptions import MlflowException
 
