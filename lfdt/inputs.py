@@ -9,7 +9,9 @@ nothing is lost. ``error`` lets a module raise its own subclass (e.g. the deploy
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import os
 import stat
 import sys
@@ -391,3 +393,36 @@ def one_line_errors(body: Callable[[], int], interrupted: str,
     except OSError as err:
         print(f"error: {os_error_message(err)}", file=sys.stderr)
         return 2
+
+
+# ------------------------------------------------------------------------- argparse types of the command lines
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a count of episodes, steps, attempts, trials, frames)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive count (>= 1)")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (a distance, a duration)."""
+    value = nonnegative_float(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
+    return value

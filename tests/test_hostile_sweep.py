@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 import services
@@ -87,3 +88,38 @@ def test_a_repo_url_that_looks_like_an_option_is_a_url_to_git(tmp_path):
     result = run_chain(spec)
     assert not result.ok and "git clone" in result.error and not marker.exists()
     assert f"repository '{spec.repo_url}' does not exist" in result.log_tail, result.log_tail
+
+
+ROOT = Path(__file__).resolve().parents[1]
+PARAMS = (ROOT / "params.yaml").read_bytes()
+
+# (id, params.yaml's bytes (None: the folder is not the project's), arguments, what the one line must say)
+PROJECT_CASES = [
+    ("params-not-utf8", PARAMS.replace(b"device: cpu", b"device: c\xffpu", 1), ["--list"],
+     "params file {tmp}/params.yaml: line 1: byte 0xff"),
+    ("params-key-twice", PARAMS.replace(b"device: cpu", b"device: cpu\ndevice: cuda", 1), ["--list"],
+     "{tmp}/params.yaml is not valid YAML: line 2, column 1: found the key 'device' a second time"),
+    ("params-key-twice-set", PARAMS.replace(b"device: cpu", b"device: cpu\ndevice: cuda", 1),
+     ["--list", "-S", "translator.lambda_dyn=1,2"], "found the key 'device' a second time"),
+    ("not-the-project", None, ["--list"], "{tmp} is not the project's folder (it has no dvc.yaml and .dvc/)"),
+    ("set-unknown-twin-task", PARAMS, ["--list", "-S", "twin.tasks=[peg_insert]"],
+     "--set twin.tasks: params.yaml twin.tasks: unknown task(s) ['peg_insert']"),
+    ("cpus-not-a-number", PARAMS, ["--list", "--cpus-per-chain", "nan"],
+     "argument --cpus-per-chain: nan is not a positive finite number"),
+]
+
+
+@pytest.mark.parametrize(("params", "args", "says"), [c[1:] for c in PROJECT_CASES],
+                         ids=[c[0] for c in PROJECT_CASES])
+def test_a_hostile_project_or_params_is_one_named_error(tmp_path, params, args, says):
+    """params.yaml and the folder are checked as the stages check them, before the plan is read."""
+    if params is not None:
+        (tmp_path / "params.yaml").write_bytes(params)
+        (tmp_path / "dvc.yaml").write_bytes((ROOT / "dvc.yaml").read_bytes())
+        (tmp_path / ".dvc").mkdir()
+    proc = subprocess.run([sys.executable, "-m", "lfdt.sweep", *args], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120)
+    lines = [line for line in proc.stderr.strip().splitlines() if not line.startswith(("usage:", " "))]
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert len(lines) == 1 and says.format(tmp=tmp_path) in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr

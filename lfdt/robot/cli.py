@@ -19,13 +19,13 @@ Exit code 2 also covers a refused target, lost tracking and an unusable rig conf
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from lfdt import inputs, twin
 from lfdt.errors import INTERRUPTED, StageError
+from lfdt.inputs import nonnegative_float, positive_float, positive_int
 from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot.arm import (
     ArmNotResponding,
@@ -43,17 +43,6 @@ EXIT_FAILED = 2
 EXIT_INTERRUPTED = INTERRUPTED
 """Ctrl-C (128 + SIGINT), as shells report it."""
 TASKS = registry.PLANAR
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1 (a count of episodes, steps, attempts, trials, frames)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not a positive count (>= 1)")
-    return value
 
 
 def episode_count(text: str) -> int:
@@ -77,24 +66,6 @@ def _check_room(first: int, count: int, option: str, where: str) -> None:
         raise InputError(f"{option} {count}: {where} holds {first} already, and a seed has {MAX_EPISODES} start "
                          f"states; at most {max(MAX_EPISODES - first, 0)} more")
 
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0 (a distance, a duration)."""
-    value = nonnegative_float(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
-    return value
-
-
-def nonnegative_float(text: str) -> float:
-    """argparse type: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
-    return value
 
 MOVE_LIMITS = SafetyLimits(max_step_deg=None)
 """``move``: joint limits, speed and the default workspace box (flange 40 mm or more above the mounting surface,

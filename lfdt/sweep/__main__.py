@@ -16,10 +16,11 @@ import os
 import sys
 from pathlib import Path
 
+from lfdt.config import ParamsError
 from lfdt.errors import StageError
-from lfdt.inputs import one_line_errors
+from lfdt.inputs import one_line_errors, positive_float
 from lfdt.sweep.chain import Remote
-from lfdt.sweep.coordinator import describe, run_points, run_sweep
+from lfdt.sweep.coordinator import check_project, describe, run_points, run_sweep
 from lfdt.sweep.plan import make_plan
 from lfdt.sweep.points import expand
 
@@ -37,7 +38,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--remote-url", help="URL of that remote (e.g. s3://bucket/lfdt); without it --remote must be a "
                                         "remote of the committed .dvc/config")
     p.add_argument("--endpoint-url", help="S3-compatible endpoint of the remote (MinIO, Ceph, a local test server)")
-    p.add_argument("--cpus-per-chain", type=float, default=1.0, help="Ray CPUs one chain takes (default 1)")
+    p.add_argument("--cpus-per-chain", type=positive_float, default=1.0, help="Ray CPUs one chain takes (default 1)")
     p.add_argument("--repo-url", help="where workers clone the project from (default this workspace's path: right "
                                       "when every node sees it, e.g. one machine or a shared file system)")
     p.add_argument("--workdir", help="directory for the clones on each worker (default its temporary directory)")
@@ -55,11 +56,12 @@ def main(argv: list[str] | None = None) -> int:
     """Parse, run, print a summary; errors that say all a user needs exit 2 with one line, Ctrl-C one line."""
     args = parser().parse_args(argv)
     return one_line_errors(lambda: _run(args, Path.cwd()), "chains that finished are kept in the run cache; the "
-                           "same command goes on from them")
+                           "same command goes on from them", refused=(ParamsError,))
 
 
 def _run(args: argparse.Namespace, root: Path) -> int:
     if args.list:
+        check_project(root)
         points = expand((root / "params.yaml").read_text(), args.sets) if args.sets else []
         print(describe(make_plan(root)))  # of the workspace's params: a point's grid may add chains
         for i, point in enumerate(points, 1):

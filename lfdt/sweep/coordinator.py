@@ -23,6 +23,7 @@ import yaml
 from tqdm import tqdm
 
 from lfdt import inputs, mlflow_runs, reach
+from lfdt.config import load_params
 from lfdt.errors import StageError
 from lfdt.files import temp_path
 from lfdt.sweep import runcache
@@ -50,10 +51,19 @@ def _git(root: Path, *args: str) -> str:
     return proc.stdout.strip()
 
 
+def check_project(root: Path) -> None:
+    """``root`` is the project's folder (dvc.yaml, .dvc/) and its params.yaml passes the stages' own checks
+    (:func:`lfdt.config.load_params`: a ParamsError naming the file or key otherwise)."""
+    if not (root / "dvc.yaml").is_file() or not (root / ".dvc").is_dir():
+        raise SweepError(f"{root} is not the project's folder (it has no dvc.yaml and .dvc/): run python -m "
+                         "lfdt.sweep where dvc.yaml is")
+    load_params(root / "params.yaml")
+
+
 def check_workspace(root: Path) -> str:
-    """The commit the chains clone; SweepError when the workspace has changes they would not see."""
-    if not (root / "dvc.yaml").exists():
-        raise SweepError(f"{root} holds no dvc.yaml: run the sweep from the project's root")
+    """The commit the chains clone (:func:`check_project` first); SweepError when the workspace has changes they
+    would not see."""
+    check_project(root)
     commit = _git(root, "rev-parse", "HEAD")
     changed = _git(root, "diff", "--name-only", "HEAD").splitlines()  # staged or not, relative to the root
     stray = [p for p in changed if not p.startswith(OUTPUT_PATHS) and Path(p).name != ".gitignore"]

@@ -20,6 +20,7 @@ import yaml
 
 from lfdt.config import ParamsError, validate_params
 from lfdt.errors import StageError
+from lfdt.tasks import registry
 
 
 class PointError(StageError):
@@ -133,8 +134,9 @@ def apply(params_yaml: str, overrides: tuple[tuple[str, Any], ...]) -> str:
     rt.dump(doc, buf)
     text = buf.getvalue()
     try:
-        validate_params(yaml.safe_load(text))
-    except ParamsError as err:
+        params = validate_params(yaml.safe_load(text))
+        registry.check_twin_names(params.twin)  # preflight's check that holds on every machine of a cluster
+    except (ParamsError, StageError) as err:
         raise PointError(f"--set {', '.join(k for k, _ in overrides)}: {err}") from None
     return text
 
