@@ -251,6 +251,15 @@ CASES = [
     Case("calibrate-out-a-folder", lambda tmp: (tmp / "v.avi").write_text("") or (tmp / "out").mkdir() or [
         "calibrate", "--camera", str(tmp / "v.avi"), "--pattern", "9", "6", "--square", "0.02", "--out",
         str(tmp / "out")], ("--out {tmp}/out: is a folder, not a file",)),
+    Case("calibrate-charuco-marker-too-big", lambda tmp: ["calibrate", "--camera", str(tmp / "none.avi"), "--pattern",
+         "5", "4", "--square", "0.02", "--charuco", "--marker", "0.05", "--out", str(tmp / "c.json")],
+         ("--marker 0.05: the marker must be smaller than its square",)),
+    Case("calibrate-board-too-small", lambda tmp: ["calibrate", "--camera", str(tmp / "none.avi"), "--pattern", "-3",
+         "5", "--square", "0.02", "--out", str(tmp / "c.json")],
+         ("--pattern -3 5: a chessboard needs at least 3 inner corners",)),
+    Case("calibrate-more-views-than-frames", lambda tmp: ["calibrate", "--camera", str(tmp / "none.avi"), "--pattern",
+         "9", "6", "--square", "0.02", "--frames", "5", "--min-views", "6", "--out", str(tmp / "c.json")],
+         ("--min-views 6: more views than --frames 5 grabs",)),
     Case("calibrate-camera-missing", lambda tmp: ["calibrate", "--camera", str(tmp / "none.avi"), "--pattern", "9",
          "6", "--square", "0.02", "--out", str(tmp / "c.json")], ("--camera {tmp}/none.avi: no such file",)),
     # a pipe, not /dev/full: a write that goes wrong replaces the target, and as root that would be the device

@@ -174,6 +174,24 @@ def add_calibrate_parser(subparsers) -> None:
     p.set_defaults(func=run_calibrate)
 
 
+def _check_board(args: argparse.Namespace) -> None:
+    """The board and the counts make a calibration possible, before any frame is grabbed (OpenCV would refuse them
+    after the operator moved the board around, or fail inside its ChArUco constructor); an InputError names the
+    option."""
+    from lfdt.errors import InputError
+
+    fewest = 2 if args.charuco else 3  # squares of a ChArUco board; a chessboard's inner corners (OpenCV: > 2)
+    if min(args.pattern) < fewest:
+        board, what = ("a ChArUco board", "squares") if args.charuco else ("a chessboard", "inner corners")
+        raise InputError(f"--pattern {args.pattern[0]} {args.pattern[1]}: {board} needs at least {fewest} {what} "
+                         "per row and column")
+    if args.charuco and args.marker >= args.square:
+        raise InputError(f"--marker {args.marker:g}: the marker must be smaller than its square (--square "
+                         f"{args.square:g})")
+    if args.min_views > args.frames:
+        raise InputError(f"--min-views {args.min_views}: more views than --frames {args.frames} grabs")
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     """Grab, calibrate, save; exit 2 with a message when the board was seen in fewer than --min-views views."""
     from lfdt.robot import calibration
@@ -182,6 +200,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.charuco and args.marker is None:
         print("error: --charuco needs --marker (marker edge in metres)", file=sys.stderr)
         return EXIT_FAILED
+    _check_board(args)
     source = _camera_source(args.camera)
     if isinstance(source, int):
         inputs.camera_device(source, "--camera")
