@@ -409,6 +409,14 @@ def positive_int(text: str) -> int:
     return value
 
 
+def tcp_port(text: str) -> int:
+    """argparse type: a TCP port, 1..65535."""
+    value = positive_int(text)
+    if value > 65535:
+        raise argparse.ArgumentTypeError(f"{value} is not a TCP port (1..65535)")
+    return value
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0 (a distance, a duration)."""
     value = nonnegative_float(text)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from lfdt import inputs, twin
 from lfdt.errors import INTERRUPTED, StageError
-from lfdt.inputs import nonnegative_float, positive_float, positive_int
+from lfdt.inputs import nonnegative_float, positive_float, positive_int, tcp_port
 from lfdt.rig.interrupt import stop_on_interrupt
 from lfdt.robot.arm import (
     ArmNotResponding,
@@ -83,8 +83,8 @@ def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--port", help="serial port of the arm, e.g. /dev/ttyUSB0 or /dev/ttyACM0")
     where.add_argument("--host", help="IP address of the arm's TCP server (myCobot 280 Pi / JN)")
-    parser.add_argument("--netport", type=int, default=9000, help="TCP port of the arm's server (default: 9000)")
-    parser.add_argument("--baudrate", type=int, default=115200, help="serial baud rate (default: 115200)")
+    parser.add_argument("--netport", type=tcp_port, default=9000, help="TCP port of the arm's server (default: 9000)")
+    parser.add_argument("--baudrate", type=positive_int, default=115200, help="serial baud rate (default: 115200)")
     parser.add_argument("--connect-timeout", type=positive_float, default=3.0, metavar="S",
                         help="seconds to wait for the TCP connection (default: 3)")
 
