@@ -417,20 +417,24 @@ def tcp_port(text: str) -> int:
     return value
 
 
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0 (a distance, a duration)."""
-    value = nonnegative_float(text)
-    if value == 0:
+    value = _number(text)
+    if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
     return value
 
 
 def nonnegative_float(text: str) -> float:
     """argparse type: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    value = _number(text)
     if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"{text} is not a positive finite number")
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number >= 0")
     return value
