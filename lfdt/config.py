@@ -13,6 +13,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic.fields import FieldInfo
 
+from lfdt.seeding import MAX_EPISODES
+
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
 MAX_COUNT = 2**31 - 1
@@ -20,6 +22,9 @@ MAX_COUNT = 2**31 - 1
 (``1e29`` written as an integer) would fail a stage after DVC removed its outputs, not in preflight."""
 PosInt = Annotated[int, Field(gt=0, le=MAX_COUNT)]
 Count = Annotated[int, Field(ge=0, le=MAX_COUNT)]
+Episodes = Annotated[int, Field(gt=0, le=MAX_EPISODES)]
+"""A count of episodes that each take a start state of their own: a seed has :data:`lfdt.seeding.MAX_EPISODES` of
+them per purpose, and a larger count would fail its stage at the first start state past them."""
 Fraction = Annotated[float, Field(gt=0, lt=1)]
 XY = Annotated[list[float], Field(min_length=2, max_length=2)]
 PosXY = Annotated[list[PosFloat], Field(min_length=2, max_length=2)]
@@ -188,7 +193,7 @@ class ExpertsConfig(Strict):
     """Environment steps between resumable checkpoints (model and replay buffer)."""
     log_every: PosInt = 5_000
     """Environment steps between learning-curve points sent to MLflow."""
-    eval_episodes: PosInt = 100
+    eval_episodes: Episodes = 100
     """Episodes with fresh seeds used to measure each expert's success rate."""
     torch_threads: PosInt = 1
     """Torch CPU threads (1 is fastest for these small networks and lets two stages share 2 cores)."""
@@ -231,7 +236,21 @@ class RandomConfig(Strict):
     def _hold(self) -> RandomConfig:
         if self.hold_min > self.hold_max:
             raise ValueError(f"hold_min ({self.hold_min}) > hold_max ({self.hold_max})")
+        _check_episodes(self.transitions, self.episode_steps, "transitions", "episode_steps")
         return self
+
+
+def _check_episodes(samples: int, steps: int, samples_key: str, steps_key: str) -> None:
+    """``samples`` recorded in episodes of ``steps`` take at most :data:`MAX_EPISODES` start states."""
+    episodes = -(-samples // steps)
+    if episodes > MAX_EPISODES:
+        raise ValueError(f"{samples_key} = {samples} in episodes of {steps_key} = {steps} are {episodes} episodes, "
+                         f"but a seed has {MAX_EPISODES} start states")
+
+
+TWIN_ATTEMPTS_PER_DEMO = 20
+"""The twin's scripted demonstrations: takes tried per demonstration kept (at least 200 in all) before its collection
+gives up."""
 
 
 class RobotProgramConfig(Strict):
@@ -293,7 +312,7 @@ class DemosConfig(Strict):
 
     per_pairing: PosInt = 200
     """Successful demonstrations kept per pairing."""
-    max_attempts: PosInt = 2_000
+    max_attempts: Episodes = 2_000
     """Give up (and fail the stage) after this many attempts per pairing."""
     deterministic: bool = True
     """Use the expert's mean action (True) or sample from it (False)."""
@@ -512,7 +531,7 @@ class BCConfig(Strict):
 class EvaluationConfig(Strict):
     """Trials in domain Y from fixed start states (the evaluation seed block, never used in training)."""
 
-    trials: PosInt = 200
+    trials: Episodes = 200
     """Trials per (method, demos, seed), from the same start states for every configuration (the paper: 20; Table I
     also shows the first 20)."""
     start_states: Literal["evaluation", "development"] = "evaluation"
@@ -543,7 +562,7 @@ class TwinParams(Strict):
     """A random target is held for 1..random_hold_max control steps."""
     demos_per_pairing: PosInt = 10
     """Successful demonstrations per pairing (the paper: 10 + 10)."""
-    trials: PosInt = 50
+    trials: Episodes = 50
     """Evaluation trials per task, method and seed, from the same start states (the paper: 10 real trials, too few
     to tell 80 % from 100 %)."""
     videos: Count = 1
@@ -597,6 +616,11 @@ class TwinParams(Strict):
         # them here would make every stage depend on the twin's task modules)
         if len(set(self.tasks)) != len(self.tasks):
             raise ValueError(f"tasks has duplicates: {self.tasks}")
+        _check_episodes(self.random_samples, self.random_episode_steps, "random_samples", "random_episode_steps")
+        if self.demos_per_pairing * TWIN_ATTEMPTS_PER_DEMO > MAX_EPISODES:
+            raise ValueError(f"demos_per_pairing = {self.demos_per_pairing}: the twin tries up to "
+                             f"{TWIN_ATTEMPTS_PER_DEMO} takes per demonstration, and a seed has {MAX_EPISODES} start "
+                             f"states; at most {MAX_EPISODES // TWIN_ATTEMPTS_PER_DEMO}")
         for task in [None, *self.task_translator]:
             cfg = self.translator if task is None else self.translator_for(task)  # validates the task's entry
             where = "translator" if task is None else f"task_translator.{task}"

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from lfdt import data, layout
-from lfdt.config import TwinParams
+from lfdt.config import TWIN_ATTEMPTS_PER_DEMO, TwinParams
+from lfdt.errors import StageError
 from lfdt.tasks import registry
 from lfdt.twin.common import SeedJob, check_real_recording, recordings, twin_schema
 
@@ -37,7 +38,7 @@ def record_random(task: str, domain: str, samples: int, episode_steps: int, seed
     return written
 
 
-def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, max_attempts: int = 200) -> dict:
+def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, max_attempts: int | None = None) -> dict:
     """Demonstrations in X in the twin (the robot programmed, the scripted person adapting); only successful ones
     are kept."""
     from lfdt.rig.recording import EpisodeRecorder, record_demo_episode
@@ -45,6 +46,8 @@ def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, max_attemp
     from lfdt.seeding import episode_seed
     from lfdt.tasks.demonstrators import ProgrammedMotion
 
+    # at least 200 takes (what ten demonstrations, the paper's, always had), more for more demonstrations
+    max_attempts = max(200, TWIN_ATTEMPTS_PER_DEMO * n) if max_attempts is None else max_attempts
     robot = layout.robot_arm(pairing)
     with SimRig(task, pairing, human="scripted") as rig:
         slot = rig.slots.index(robot)
@@ -53,7 +56,8 @@ def record_demos(task: str, pairing: str, n: int, seed: int, out_dir, max_attemp
         kept, attempts, lengths = 0, 0, []
         while kept < n:
             if attempts >= max_attempts:
-                raise RuntimeError(f"{task} {pairing}: {kept} successful demonstrations in {attempts} attempts")
+                raise StageError(f"{task} {pairing}: the twin's scripted demonstrations succeeded {kept} times in "
+                                 f"{attempts} takes, {n} needed (twin.demos_per_pairing)")
             obs = rig.reset(seed=episode_seed("demos", seed, pairing, attempts))
             rec.start()
             program = ProgrammedMotion(task, slot, obs, rig.control_dt)
