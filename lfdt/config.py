@@ -665,7 +665,27 @@ class Params(Strict):
         if max(self.grid.demos) > self.demos.per_pairing:
             raise ValueError(f"grid.demos asks for {max(self.grid.demos)} demonstrations per pairing but "
                              f"demos.per_pairing collects only {self.demos.per_pairing}")
+        for demos in self.grid.demos:
+            _check_holdout(demos, self.translator.holdout_fraction, "grid.demos", "translator.holdout_fraction")
+        if self.twin.backend == "sim":  # the robots' recordings are counted by the twin's stages
+            for task in self.twin.tasks:
+                where = f"twin.task_translator.{task}" if task in self.twin.task_translator else "twin.translator"
+                _check_holdout(self.twin.demos_per_pairing, self.twin.translator_for(task).holdout_fraction,
+                               "twin.demos_per_pairing", f"{where}.holdout_fraction")
         return self
+
+
+def held_out_count(episodes: int, fraction: float) -> int:
+    """Demonstrations (whole episodes) of a pairing that a translator holds out for checkpoint selection: none at
+    ``fraction`` 0, else at least one (:func:`lfdt.translation.transitions.split_held_out`)."""
+    return 0 if fraction <= 0 else max(1, int(round(fraction * episodes)))
+
+
+def _check_holdout(episodes: int, fraction: float, episodes_key: str, fraction_key: str) -> None:
+    held = held_out_count(episodes, fraction)
+    if held and held >= episodes:
+        raise ValueError(f"{episodes_key} = {episodes} with {fraction_key} = {fraction:g}: {held} of {episodes} "
+                         "demonstrations per pairing would be held out, none left to train the translator on")
 
 
 class ParamsError(ValueError):

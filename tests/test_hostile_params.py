@@ -67,6 +67,8 @@ CASES = [
       "a seed has 100000 start states"]),
     ("twin-demos-past-the-start-states", _sub("demos_per_pairing: 10", "demos_per_pairing: 6000"),
      ["twin: demos_per_pairing = 6000", "at most 5000"]),
+    ("one-demo-with-a-holdout", _sub("demos: [50, 100, 200]", "demos: [1, 100, 200]"),
+     ["grid.demos = 1 with translator.holdout_fraction = 0.1: 1 of 1 demonstrations per pairing would be held out"]),
     ("unknown-twin-task", _sub("tasks: [block_push, peg_insertion]", "tasks: [block_push, peg_insert]"),
      ["twin.tasks: unknown task(s) ['peg_insert']", "'peg_insertion'"]),
     ("unknown-twin-task-override", _sub("task_bc: {block_push: {input_noise: 0.1}}",

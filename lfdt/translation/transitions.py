@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfdt import data, layout
+from lfdt.config import held_out_count
+from lfdt.errors import StageError
 from lfdt.layout import TaskLayout
 
 PAIRING_INDEX = {p: i for i, p in enumerate(layout.PAIRINGS)}
@@ -70,9 +72,10 @@ def split_held_out(sets: dict[str, Transitions], fraction: float, seed: int
     rng = np.random.default_rng([seed, 7])
     for p, t in sets.items():
         eps = np.unique(t.episode)
-        if len(eps) < 2:
-            raise ValueError(f"{p}: {len(eps)} demonstration(s) cannot be split for translator.holdout_fraction")
-        n = max(1, int(round(fraction * len(eps))))
+        n = held_out_count(len(eps), fraction)
+        if n >= len(eps):
+            raise StageError(f"{p}: {len(eps)} demonstration(s) cannot be split for translator.holdout_fraction "
+                             f"{fraction:g} ({n} held out, none left to train on)")
         out = np.isin(t.episode, rng.choice(eps, size=n, replace=False))
         train[p], held[p] = t.subset(~out), t.subset(out)
     return train, held
