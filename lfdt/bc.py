@@ -129,7 +129,8 @@ def recovery_augment(frame: pd.DataFrame, dyn, tl: TaskLayout, copies: int, nois
 
 def _split(episodes: np.ndarray, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
     eps = np.unique(episodes)
-    n_val = max(1, int(round(val_fraction * len(eps)))) if len(eps) > 1 else 0
+    # at least one validation episode, and at least one left to train on (a high fraction of few episodes)
+    n_val = min(max(1, int(round(val_fraction * len(eps)))), len(eps) - 1) if len(eps) > 1 else 0
     val_eps = rng.choice(eps, size=n_val, replace=False) if n_val else np.array([], dtype=eps.dtype)
     return np.isin(episodes, val_eps)
 

@@ -117,7 +117,11 @@ def split_episodes(episode: np.ndarray, val_fraction: float, seed: int) -> tuple
     """Boolean train/validation masks; whole episodes go to one side."""
     eps = np.unique(episode)
     rng = np.random.default_rng(seed)
-    n_val = max(1, int(round(val_fraction * len(eps))))
+    if len(eps) < 2:
+        raise StageError(f"{len(eps)} random-motion episode(s) cannot be split into training and validation "
+                         "(dynamics.val_fraction); collect more random motion")
+    # at least one validation episode, and at least one left to train on
+    n_val = min(max(1, int(round(val_fraction * len(eps)))), len(eps) - 1)
     val_eps = rng.choice(eps, size=n_val, replace=False)
     val = np.isin(episode, val_eps)
     return ~val, val

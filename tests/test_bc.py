@@ -75,3 +75,16 @@ def test_recovery_copies_are_perturbed_states_labelled_back_onto_the_demonstrati
         want = torch.clamp(dyn.inverse_model(y_n, y2_n), -1, 1).numpy()
     np.testing.assert_allclose(copy[[layout.ACTION_PREFIX + c for c in a_cols]].to_numpy(), want, atol=1e-5)
     assert out.equals(bc.recovery_augment(df, dyn, tl, 2, 0.1, 3))  # the seed fixes the perturbations
+
+
+def test_a_high_validation_fraction_of_few_episodes_leaves_one_to_train_on():
+    """bc.val_fraction 0.9 of two episodes (a cell whose re-executions mostly failed) keeps one for training; the
+    split of many episodes is what it always was."""
+    import numpy as np
+
+    from lfdt.bc import _split
+
+    val = _split(np.repeat([0, 1], 5), 0.9, np.random.default_rng(0))
+    assert val.sum() == 5 and (~val).sum() == 5
+    many = np.repeat(np.arange(40), 3)
+    assert _split(many, 0.1, np.random.default_rng(0)).sum() == 4 * 3
