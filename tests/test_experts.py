@@ -16,6 +16,7 @@ import yaml
 
 from lfdt import data
 from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig
+from lfdt.errors import StageError
 from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push import experts
 
@@ -60,7 +61,7 @@ def test_train_save_load_and_demos(tmp_path, protocol):
 def test_demos_fail_loudly_when_expert_cannot_succeed(tmp_path):
     model, _ = experts.train_expert("HR2", EnvConfig(), TINY.model_copy(update={"total_timesteps": 200}),
                                     DemosConfig(), tmp_path / "ckpt")
-    with pytest.raises(RuntimeError, match="demos.max_attempts = 3"):
+    with pytest.raises(StageError, match="demos.max_attempts = 3"):
         experts.collect_demos(model, "HR2", EnvConfig(), DemosConfig(per_pairing=3, max_attempts=3))
 
 

@@ -69,6 +69,8 @@ CASES = [
      ["twin: demos_per_pairing = 6000", "at most 5000"]),
     ("one-demo-with-a-holdout", _sub("demos: [50, 100, 200]", "demos: [1, 100, 200]"),
      ["grid.demos = 1 with translator.holdout_fraction = 0.1: 1 of 1 demonstrations per pairing would be held out"]),
+    ("box-out-of-reach", _sub("    start: [0.0, 0.22]", "    start: [0.0, 0.36]"),
+     ["params.yaml env: in domain", "out of reach at the start with the box at", "env.box.start"]),
     ("unknown-twin-task", _sub("tasks: [block_push, peg_insertion]", "tasks: [block_push, peg_insert]"),
      ["twin.tasks: unknown task(s) ['peg_insert']", "'peg_insertion'"]),
     ("unknown-twin-task-override", _sub("task_bc: {block_push: {input_noise: 0.1}}",

@@ -145,6 +145,43 @@ def start_pose(arm: ArmSpec, target: np.ndarray, tip_heading: float) -> np.ndarr
     return best
 
 
+def contact_targets(arms: tuple[ArmSpec, ArmSpec], cfg: EnvConfig, box_pose: np.ndarray) -> np.ndarray:
+    """Where each arm's end effector centre is when it touches its contact point on the box's rear face (2, 2)."""
+    x, y, yaw = box_pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.zeros((2, 2))
+    for i, arm in enumerate(arms):
+        lx = (-1 if arm.slot == 1 else 1) * cfg.contact_x
+        ly = -cfg.box.size[1] / 2 - arm.cfg.tip_radius
+        out[i] = (x + c * lx - s * ly, y + s * lx + c * ly)
+    return out
+
+
+def check_start_reachable(cfg: EnvConfig) -> None:
+    """Both arms of every domain reach their start poses at the corners and the middle of the start distribution
+    (the box's position +- start_noise_xy, its yaw +- start_noise_yaw); a StageError naming the keys otherwise, where
+    the environment would fail at whichever reset first drew such a start, deep inside a stage (the preflight
+    stage's check)."""
+    from lfdt.errors import StageError
+
+    b = cfg.box
+    n, n_yaw = b.start_noise_xy, b.start_noise_yaw
+    poses = [np.array([b.start[0] + dx, b.start[1] + dy, yaw])
+             for dx in (-n, 0.0, n) for dy in (-n, 0.0, n) for yaw in (-n_yaw, 0.0, n_yaw)]
+    for domain in layout.DOMAINS:
+        arms = arm_specs(domain, cfg)
+        for pose in poses:
+            back = np.array([-math.sin(pose[2]), math.cos(pose[2])])  # as sample_initial_qpos places the ends
+            try:
+                for arm, target in zip(arms, contact_targets(arms, cfg, pose)):
+                    start_pose(arm, target - cfg.start_gap * back, pose[2])
+            except ValueError as err:
+                raise StageError(f"params.yaml env: in domain {domain}, {err} at the start with the box at x = "
+                                 f"{pose[0]:.3f} m, y = {pose[1]:.3f} m, yaw {pose[2]:.2f} rad; move env.box.start "
+                                 "closer, narrow its start_noise_xy / start_noise_yaw, or change env.base_x or the "
+                                 "arms' links") from None
+
+
 def _wrap(a: float | np.ndarray) -> float | np.ndarray:
     """Angle(s) wrapped into [-pi, pi)."""
     if isinstance(a, np.ndarray):
@@ -235,14 +272,7 @@ class BoxPushModel:
 
     def contact_targets(self, box_pose: np.ndarray) -> np.ndarray:
         """Where each end effector's centre is when it touches its contact point on the box's rear face (2, 2)."""
-        x, y, yaw = box_pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        out = np.zeros((2, 2))
-        for i, arm in enumerate(self.arms):
-            lx = (-1 if arm.slot == 1 else 1) * self.cfg.contact_x
-            ly = -self.cfg.box.size[1] / 2 - arm.cfg.tip_radius
-            out[i] = (x + c * lx - s * ly, y + s * lx + c * ly)
-        return out
+        return contact_targets(self.arms, self.cfg, box_pose)
 
     def sample_initial_qpos(self, rng: np.random.Generator, y_spread: float = 0.0) -> np.ndarray:
         """A start configuration: noisy box pose, end effectors just behind the box's rear face, noisy joints.
@@ -261,6 +291,8 @@ class BoxPushModel:
         back = np.array([-math.sin(box[2]), math.cos(box[2])])
         qs = []
         for arm, target in zip(self.arms, targets):
+            # each arm's pose, then its noise: an arm out of reach ends the draw with the first arm's noise drawn
+            # (random motion draws again, and its data depend on that order)
             q = start_pose(arm, target - self.cfg.start_gap * back, box[2])
             q = q + rng.uniform(-self.cfg.joint_noise, self.cfg.joint_noise, size=arm.n)
             qs.append(np.clip(q, -np.asarray(arm.cfg.joint_range), np.asarray(arm.cfg.joint_range)))

@@ -41,6 +41,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from lfdt import data, layout
 from lfdt.config import DemosConfig, EnvConfig, ExpertsConfig, ProgramConfig
+from lfdt.errors import StageError
 from lfdt.nets import pin_linear_layers
 from lfdt.optim import Adam
 from lfdt.seeding import episode_seed, seed_everything
@@ -368,7 +369,7 @@ def collect_demos(model: SAC, pairing: str, env_cfg: EnvConfig, cfg: DemosConfig
     kept, attempts, lengths = [], 0, []
     while len(kept) < cfg.per_pairing:
         if attempts >= cfg.max_attempts:
-            raise RuntimeError(f"{pairing}: only {len(kept)} successful demonstrations in {attempts} attempts "
+            raise StageError(f"{pairing}: only {len(kept)} successful demonstrations in {attempts} attempts "
                                f"(demos.per_pairing = {cfg.per_pairing}, demos.max_attempts = {cfg.max_attempts})")
         ep = run_episode(model, env, episode_seed("demos", cfg.seed, pairing, attempts), cfg.deterministic)
         ep["attempt"] = attempts

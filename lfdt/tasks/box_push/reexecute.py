@@ -24,6 +24,7 @@ import torch
 from lfdt import layout
 from lfdt.config import EnvConfig, TrackConfig
 from lfdt.dynamics import DynamicsModels
+from lfdt.errors import StageError
 from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import BoxPushEnv, forward_kinematics, jacobian
 
@@ -102,6 +103,6 @@ def execute(df: pd.DataFrame, env_cfg: EnvConfig, cfg: TrackConfig, dyn: Dynamic
              "execution_success_rate": n_ok / max(n_exec, 1),
              "mean_execution_length": float(np.mean(lengths)) if lengths else 0.0}
     if not kept:
-        raise RuntimeError(f"none of {n_exec} translated demonstrations succeeded when re-executed in Y "
+        raise StageError(f"none of {n_exec} translated demonstrations succeeded when re-executed in Y "
                            f"(track.controller = {cfg.controller!r}); lfdt_track has no data to learn from")
     return pd.concat(kept, ignore_index=True), stats
