@@ -395,7 +395,16 @@ def one_line_errors(body: Callable[[], int], interrupted: str,
         return 2
 
 
-# ------------------------------------------------------------------------- argparse types of the command lines
+# ------------------------------------------------------------------- argparse: the parser and its argument types
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose refusal of a command line is one line, as every other refusal is: ``error: <prog>:
+    <what>; <prog> --help lists the options`` and exit 2, without the usage lines argparse prints first. Its
+    subcommands' parsers are of this class too."""
+
+    def error(self, message: str):  # noqa: D102 - argparse's hook
+        self.exit(2, f"error: {self.prog}: {' '.join(message.split())}; `{self.prog} --help` lists the options\n")
 
 
 def positive_int(text: str) -> int:

@@ -9,13 +9,12 @@ it before starting the UI, and ``tools/mlflow_ui_check.py`` opens them in headle
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass
 
 from lfdt import mlflow_runs
-from lfdt.inputs import one_line_errors
+from lfdt.inputs import ArgumentParser, one_line_errors
 
 SHARED_VIEW_TAG = "mlflow.sharedViewState."
 """Prefix of the experiment tags MLflow's UI reads a shared runs-table view from (MLflow 3)."""
@@ -129,7 +128,7 @@ def install(experiment: str | None = None) -> tuple[str, dict[str, tuple[View, d
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ui", default="http://127.0.0.1:5000", help="where the MLflow UI is (for the printed URLs)")
     args = ap.parse_args(argv)
     # the store or LFDT_MLFLOW_EXPERIMENT: one line naming it, as a stage says it

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lfdt.errors import InputError, StageError
-from lfdt.inputs import one_line_errors
+from lfdt.inputs import ArgumentParser, one_line_errors
 
 
 class NotRestorable(StageError):
@@ -215,7 +215,7 @@ def _from_git(root: Path, out) -> bool | None:
 
 def main(argv: list[str] | None = None) -> int:
     """The command line; exit 0 when every output named is back, 2 (one line per output) when some could not be."""
-    p = argparse.ArgumentParser(prog="python -m lfdt.restore", description=__doc__.splitlines()[0],
+    p = ArgumentParser(prog="python -m lfdt.restore", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog=__doc__.split("\n\n", 1)[1])
     p.add_argument("stages", nargs="*", help="stages as dvc.lock names them (e.g. train_bc@lfdt-50); default all")

@@ -15,7 +15,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from lfdt import errors, mlflow_runs
+from lfdt import errors, inputs, mlflow_runs
 from lfdt.config import Params, ParamsError, load_params
 from lfdt.errors import StageError
 from lfdt.files import write_atomic
@@ -39,7 +39,7 @@ def main(fn: Callable[[], None]) -> None:
     The stage ends within a second of the `dvc repro` that started it (:func:`lfdt.lifeline.watch`; its workers end
     with it), and holds a lock on its command line in this workspace while it runs, so that a rerun never writes
     the same outputs beside a stage still running."""
-    from lfdt import inputs, lifeline
+    from lfdt import lifeline
 
     lifeline.watch()
 
@@ -162,7 +162,7 @@ def wall_since_start() -> float:
 def parser(description: str, paths: Mapping[str, str] | None = None) -> argparse.ArgumentParser:
     """A stage's argument parser: ``--params`` and, for each entry of ``paths``, a required ``--<name>`` (a path
     from dvc.yaml's ``vars``, given on the stage's command line) with its help text."""
-    ap = argparse.ArgumentParser(description=description)
+    ap = inputs.ArgumentParser(description=description)
     ap.add_argument("--params", default="params.yaml")
     for name, help_text in (paths or {}).items():
         ap.add_argument(f"--{name}", required=True, type=Path, metavar="PATH", help=help_text)

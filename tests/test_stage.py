@@ -201,3 +201,21 @@ def test_stage_main_ends_a_params_problem_a_full_disk_or_ctrl_c_in_one_line(tmp_
         assert capsys.readouterr().err == line + "\n", exc
     stage.main(lambda: None)  # a stage that ends well returns
     assert capsys.readouterr().err == ""
+
+
+def test_a_refused_command_line_is_one_line(capsys):
+    """Every command line's parser (stages, the robot CLI, the sweep, restore, the views) refuses in one line, without
+    argparse's usage lines before it."""
+    import pytest
+
+    from lfdt.robot.cli import build_parser
+
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(["deploy", "--trials", "0", "--sim"])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.count("\n") == 1 and err.startswith("error: python -m lfdt.robot deploy: "), err
+    assert "--trials: 0 is not a positive count" in err and "`python -m lfdt.robot deploy --help`" in err
+    with pytest.raises(SystemExit):
+        stage.parser("a stage", {"out": "where"}).parse_args([])
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the following arguments are required: --out" in err, err

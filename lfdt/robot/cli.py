@@ -611,7 +611,7 @@ def run_deploy(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m lfdt.robot`` parser; add subcommands with an ``add_<name>_parser(subparsers)`` function."""
-    parser = argparse.ArgumentParser(prog="python -m lfdt.robot",
+    parser = inputs.ArgumentParser(prog="python -m lfdt.robot",
                                      description="Talk to the myCobot 280 arms (README: Real robot).")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_check_parser(subparsers)

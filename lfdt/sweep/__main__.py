@@ -18,7 +18,7 @@ from pathlib import Path
 
 from lfdt.config import ParamsError
 from lfdt.errors import StageError
-from lfdt.inputs import one_line_errors, positive_float
+from lfdt.inputs import ArgumentParser, one_line_errors, positive_float
 from lfdt.sweep.chain import Remote
 from lfdt.sweep.coordinator import check_project, describe, run_points, run_sweep
 from lfdt.sweep.plan import make_plan
@@ -27,7 +27,7 @@ from lfdt.sweep.points import expand
 
 def parser() -> argparse.ArgumentParser:
     """The command line."""
-    p = argparse.ArgumentParser(prog="python -m lfdt.sweep", description=__doc__.splitlines()[0],
+    p = ArgumentParser(prog="python -m lfdt.sweep", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--list", action="store_true", help="print the plan (shared stages, chains, final stages), run "
                                                        "nothing")
