@@ -85,7 +85,8 @@ def test_checkpoint_of_other_params_is_not_resumed(tmp_path):
 @pytest.mark.slow
 def test_killed_training_resumes_where_it_stopped(tmp_path):
     params = {"experts": {**TINY.model_dump(), "total_timesteps": 3_000, "checkpoint_every": 500},
-              "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]}}
+              "demos": {"per_pairing": 1, "success_only": False}, "grid": {"demos": [1]},
+              "translator": {"holdout_fraction": 0.0}}  # one demonstration leaves none to hold out (preflight's rule)
     full = yaml.safe_load((ROOT / "params.yaml").read_text())  # a stage takes only a complete params file
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(smoke.merge(full, params)))
     cmd = [sys.executable, str(ROOT / "stages/train_experts.py"), "--experts", "models/experts",  # both pairings
