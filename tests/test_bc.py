@@ -80,8 +80,6 @@ def test_recovery_copies_are_perturbed_states_labelled_back_onto_the_demonstrati
 def test_a_high_validation_fraction_of_few_episodes_leaves_one_to_train_on():
     """bc.val_fraction 0.9 of two episodes (a cell whose re-executions mostly failed) keeps one for training; the
     split of many episodes is what it always was."""
-    import numpy as np
-
     from lfdt.bc import _split
 
     val = _split(np.repeat([0, 1], 5), 0.9, np.random.default_rng(0))

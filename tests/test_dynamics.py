@@ -131,12 +131,6 @@ def test_object_frame_ratios_of_a_model_that_predicts_no_change_are_one():
 
 
 def test_the_episode_split_keeps_one_episode_on_each_side_or_names_the_problem():
-    import numpy as np
-    import pytest
-
-    from lfdt.dynamics import split_episodes
-    from lfdt.errors import StageError
-
     train, val = split_episodes(np.repeat([0, 1, 2], 4), 0.99, seed=0)
     assert train.sum() == 4 and val.sum() == 8
     with pytest.raises(StageError, match="1 random-motion episode"):
