@@ -1,10 +1,14 @@
-"""What starting a matrix stage's workers costs: ``forkserver`` (lfdt.parallel's default) against ``spawn``.
+"""What starting a matrix stage's workers costs: ``forkserver`` (lfdt.parallel's default) against ``spawn``, and
+against a forkserver that preloads nothing (``forkserver_bare``: what Python 3.11 gave before run_jobs named the
+modules to preload).
 
 Each measurement is a fresh process, as a stage is: it imports what the translator stage imports (torch, MLflow,
-MuJoCo, the job's code), then runs two tiny jobs in two workers through lfdt.parallel.run_jobs. With ``spawn`` each
-worker imports all of that again; with ``forkserver`` one server process does, and the workers are its forks. Both
-ways are timed in one run, alternately; reported: the medians of each and their ratio (spawn / forkserver), with the
-CPU time of the whole process tree. The whole smoke DAG (tests/smoke_params.yaml) is where it adds up: ``--smoke N``
+MuJoCo, the job's code), then runs two tiny jobs in two workers through lfdt.parallel.run_jobs; each job imports
+MLflow, as a job that opens its run does. With ``spawn`` each worker imports all of that again; with ``forkserver``
+one server process does, and the workers are its forks; with ``forkserver_bare`` each fork imports it again. The
+ways are timed in one run, alternately; reported: the medians of each and the ratios (spawn / forkserver,
+forkserver_bare / forkserver), with the CPU time of the whole process tree. The whole smoke DAG
+(tests/smoke_params.yaml) is where it adds up: ``--smoke N``
 also times N `dvc repro` of it each way, alternately, each in a fresh copy of the project (about 4 minutes each on a
 2-core CPU). Writes benchmarks/results/worker_start.json.
 """
@@ -29,18 +33,28 @@ import lfdt.box_push_jobs.translator  # noqa: F401  (what a translator stage's p
 from lfdt import numerics, parallel
 
 ROOT = Path(__file__).resolve().parents[1]
-METHODS = ("spawn", "forkserver")
+METHODS = ("spawn", "forkserver", "forkserver_bare")
+SMOKE_METHODS = ("spawn", "forkserver")
+PRELOAD = ("lfdt.box_push_jobs.translator",)
+"""What a translator stage's server imports for its job (the benchmark's job lives in this script, which Python 3.11's
+server cannot preload)."""
 
 
 def tiny_job(job: int, progress=None) -> int:
-    """A job that does next to nothing: what is timed is the workers' start."""
+    """A job that does next to nothing but import what a job opening its MLflow run imports: what is timed is the
+    workers' start."""
+    import mlflow  # noqa: F401
     import torch
 
     return int(torch.arange(job + 3).sum())
 
 
 def _child(method: str) -> None:
-    out = parallel.run_jobs(tiny_job, [0, 1], workers=2, method=method, desc=method)
+    from lfdt.mlflow_runs import worker_modules
+
+    preload = () if method == "forkserver_bare" else (*PRELOAD, *worker_modules())
+    out = parallel.run_jobs(tiny_job, [0, 1], workers=2, method=method.removesuffix("_bare"), desc=method,
+                            preload=preload)
     assert out == [3, 6], out
 
 
@@ -103,20 +117,23 @@ def main() -> None:
             times[m]["wall_s"].append(wall)
             times[m]["cpu_s"].append(cpu)
             print(f"{m}: {wall:.2f} s wall, {cpu:.2f} s CPU", file=sys.stderr)
-    smoke: dict[str, dict[str, list[float]]] = {m: {"wall_s": [], "cpu_s": []} for m in METHODS}
+    smoke: dict[str, dict[str, list[float]]] = {m: {"wall_s": [], "cpu_s": []} for m in SMOKE_METHODS}
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.smoke):
-            for m in METHODS:
+            for m in SMOKE_METHODS:
                 wall, cpu = _smoke(m, Path(tmp))
                 smoke[m]["wall_s"].append(wall)
                 smoke[m]["cpu_s"].append(cpu)
                 print(f"smoke DAG, {m}: {wall:.1f} s wall, {cpu:.1f} s CPU", file=sys.stderr)
     med = {m: {k: float(np.median(v)) for k, v in times[m].items()} for m in METHODS}
     info = numerics.describe()
-    res = {"benchmark": "a stage process that runs two tiny jobs in two workers: spawn vs forkserver",
+    res = {"benchmark": "a stage process that runs two tiny jobs in two workers: spawn, forkserver, forkserver with "
+                        "nothing preloaded",
            "repeats": args.repeats, "times": times, "median": med,
            "ratio_wall_spawn_over_forkserver": med["spawn"]["wall_s"] / med["forkserver"]["wall_s"],
            "ratio_cpu_spawn_over_forkserver": med["spawn"]["cpu_s"] / med["forkserver"]["cpu_s"],
+           "ratio_wall_bare_over_forkserver": med["forkserver_bare"]["wall_s"] / med["forkserver"]["wall_s"],
+           "ratio_cpu_bare_over_forkserver": med["forkserver_bare"]["cpu_s"] / med["forkserver"]["cpu_s"],
            "smoke_runs": args.smoke, "smoke": smoke,
            "smoke_ratio_wall_spawn_over_forkserver": (float(np.median(smoke["spawn"]["wall_s"])
                                                        / np.median(smoke["forkserver"]["wall_s"]))

@@ -175,6 +175,14 @@ def benchmarks(root: Path) -> str:
     lines.append(f"| a stage's two workers: spawn vs forkserver, whole stage process (s, wall; lower is better) | "
                  f"{med['forkserver']['wall_s']:.1f} | {med['spawn']['wall_s']:.1f} | "
                  f"**{ws['ratio_wall_spawn_over_forkserver']:.2f}** | |")
+    if "forkserver_bare" in med:  # results of benchmarks/worker_start.py since 2026-12-07
+        lines.append(f"| the same, CPU of the process tree (s; lower is better) | {med['forkserver']['cpu_s']:.1f} | "
+                     f"{med['spawn']['cpu_s']:.1f} | **{ws['ratio_cpu_spawn_over_forkserver']:.2f}** | |")
+        for unit, key in (("wall", "wall_s"), ("CPU of the process tree", "cpu_s")):
+            lines.append(f"| a stage's two workers: a forkserver preloading nothing (Python 3.11's default) vs "
+                         f"lfdt.parallel's (s, {unit}; lower is better) | {med['forkserver'][key]:.1f} | "
+                         f"{med['forkserver_bare'][key]:.1f} | "
+                         f"**{ws['ratio_' + key.split('_')[0] + '_bare_over_forkserver']:.2f}** | |")
     if ws.get("smoke_runs"):
         sm = {m: statistics.median(ws["smoke"][m]["wall_s"]) for m in ("spawn", "forkserver")}
         lines.append(f"| the smoke DAG's `dvc repro`: spawn vs forkserver (s, wall; lower is better) | "
@@ -188,7 +196,8 @@ def benchmarks(root: Path) -> str:
     lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']} "
               f"({pc['cpu_isa'].upper()}), {pc['date']}, medians of {pc['repeats']}; on other CPUs where named. "
               f"Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
-              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's time / forkserver's. "
+              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's (or the bare server's) "
+              f"time / lfdt.parallel's forkserver's. "
               f"Optimizer start: {os_['cpu_model']}, {os_['date']}, medians of {os_['repeats']} processes each way; "
               f"ratio = with the compiler / without."]
     return "\n".join(lines)

@@ -245,7 +245,8 @@ def _fit_in_parallel(d: RandomY, cfg: DynamicsConfig, log, progress, device) -> 
     from lfdt.parallel import run_jobs
 
     (state_f, res_f), (state_g, res_g) = run_jobs(_fit_job, [(d, cfg, str(device), "f"), (d, cfg, str(device), "g")],
-                                                  2, total=2 * cfg.iterations, desc="F and F^-1 side by side")
+                                                  2, total=2 * cfg.iterations, desc="F and F^-1 side by side",
+                                                  preload=())  # F's fit logs nothing to MLflow
     models = DynamicsModels(d.y.shape[1], d.a.shape[1], list(cfg.hidden),
                             normalise_actions=cfg.action_scale == "normalised")
     models.load_state_dict({k: (state_g if k.startswith("g.") else state_f)[k] for k in state_f})

@@ -7,7 +7,10 @@ names. Adding an ablation is one entry here (with its translator overrides) plus
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:
+    from lfdt.config import TranslatorConfig
 
 
 @dataclass(frozen=True)
@@ -63,3 +66,11 @@ def get(name: str) -> Method:
 def translator_methods() -> list[str]:
     """Methods that train a translator of their own."""
     return [m.name for m in METHODS.values() if m.trains_translator]
+
+
+def translator_config(method: str, cfg: TranslatorConfig) -> TranslatorConfig:
+    """The translator config of a translator method (an ablation sets one weight to zero: its overrides)."""
+    m = get(method)
+    if not m.trains_translator:
+        raise ValueError(f"{method!r} trains no translator; translator methods: {translator_methods()}")
+    return cfg.model_copy(update=m.overrides)

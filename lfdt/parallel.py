@@ -6,14 +6,18 @@ process, and gathers their results in job order. A job that fails stops the stag
 ``workers=1`` the jobs run one after the other in this process (the serial baseline of
 ``benchmarks/parallel_speedup.py``).
 
-The workers start by ``forkserver`` (:func:`start_method`): a fresh server process imports the stage's script and
-its modules once (torch, MLflow, the job's code), then each worker is a fork of it. Nothing is shared with the stage
-process, as with ``spawn``, but the workers do not each import torch and MLflow again: a small stage's start is where
-that shows (``benchmarks/worker_start.py``), and every result is the same bits either way.
+The workers start by ``forkserver`` (:func:`start_method`): a fresh server process imports the job's module and
+what the workers import beyond it (``preload``: MLflow and its store) once, then each worker is a fork of it. Nothing
+is shared with the stage process, as with ``spawn``, but the workers do not each import torch and MLflow again: a
+small stage's start is where that shows (``benchmarks/worker_start.py``), and every result is the same bits either
+way. The modules are named to the server explicitly: Python 3.11's server never imports the stage's script itself
+(CPython gh-126631: it looks for a ``main_path`` key the preparation data does not have), so each worker used to
+import everything on its own.
 """
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing as mp
 import os
 import queue
@@ -22,6 +26,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from tqdm import tqdm
@@ -90,6 +95,22 @@ def _describe(job: Any) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
+@dataclass(frozen=True)
+class Job:
+    """A job function named by its module and name: the stage process that runs it need not import that module
+    (torch, MuJoCo and the job's code take seconds to import; a worker's forkserver imports them once). A stage names
+    its job this way where it needs nothing else from the module; tests/test_dvc_deps.py counts the named module as
+    one the stage imports."""
+
+    module: str
+    """The job's module, ``lfdt.box_push_jobs.bc``."""
+    name: str
+    """The function in it, called as ``fn(job, progress)``."""
+
+    def __call__(self, job: Any, progress: Progress) -> Any:
+        return getattr(importlib.import_module(self.module), self.name)(job, progress)
+
+
 def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
     progress = _QueueProgress(_PROGRESS_QUEUE)
     try:
@@ -99,12 +120,15 @@ def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
 
 
 def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: int, total: int | None = None,
-             desc: str = "jobs", unit: str = "it", method: str | None = None) -> list[Any]:
+             desc: str = "jobs", unit: str = "it", method: str | None = None,
+             preload: Sequence[str] | None = None) -> list[Any]:
     """``fn(job, progress)`` for every job, ``workers`` processes at a time; results in job order.
 
-    ``fn`` must be importable by name (a module-level function) and ``job`` picklable. ``total`` is the
-    progress bar's length (the sum of what the jobs report); ``method`` how the workers start (``forkserver`` or
-    ``spawn``; None: :func:`start_method`).
+    ``fn`` must be importable by name (a module-level function, or a :class:`Job`) and ``job`` picklable. ``total``
+    is the progress bar's length (the sum of what the jobs report); ``method`` how the workers start (``forkserver`` or
+    ``spawn``; None: :func:`start_method`); ``preload`` the modules, beyond ``fn``'s, that a forkserver imports once
+    for all its workers (None: what a job's MLflow run imports, :func:`lfdt.mlflow_runs.worker_modules`; the first
+    call of a process decides: its server serves the later ones).
     """
     bar = tqdm(total=total, desc=desc, unit=unit, unit_scale=True, mininterval=1.0, dynamic_ncols=True,
                file=sys.stderr)
@@ -112,6 +136,14 @@ def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: i
         if workers <= 1 or len(jobs) <= 1:
             return [fn(job, bar) for job in jobs]
         ctx = mp.get_context(method or start_method())
+        if ctx.get_start_method() == "forkserver":
+            if preload is None:
+                from lfdt.mlflow_runs import worker_modules
+
+                preload = worker_modules()
+            # lfdt.numerics first: its pins must precede numpy's and torch's import in the server as everywhere
+            module = fn.module if isinstance(fn, Job) else fn.__module__
+            ctx.set_forkserver_preload(["lfdt.numerics", module, *preload])
         q = ctx.Queue()
         done = threading.Event()
 

@@ -5,7 +5,9 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 
 from lfdt import methods, parallel, stage
 from lfdt.box_push_jobs import common
-from lfdt.box_push_jobs.track import track_job
+
+TRACK_JOB = parallel.Job("lfdt.box_push_jobs.track", "track_job")
+"""By name: this process never imports torch or MuJoCo (its workers do, once)."""
 
 
 def run() -> None:
@@ -16,7 +18,7 @@ def run() -> None:
                           dynamics_dir=args.dynamics_dir)
     group = cfgs[0].group
     with stage.frame(args.reports / f"{group}.json") as f:
-        results = parallel.run_jobs(track_job, cfgs, p.grid.workers, total=2 * args.demos * len(cfgs),
+        results = parallel.run_jobs(TRACK_JOB, cfgs, p.grid.workers, total=2 * args.demos * len(cfgs),
                                     desc=f"re-execute {group}", unit="demo")
         f.report.update(stage.group_report(results))
     for r in results:

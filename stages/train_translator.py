@@ -5,9 +5,9 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 
 from lfdt import methods, parallel, stage
 from lfdt.box_push_jobs import common
-from lfdt.box_push_jobs.translator import translator_job
-from lfdt.nets import torch_device
-from lfdt.translation.model import method_config
+
+TRANSLATOR_JOB = parallel.Job("lfdt.box_push_jobs.translator", "translator_job")
+"""By name: this process never imports torch; each job checks params.yaml's device before it loads anything."""
 
 
 def run() -> None:
@@ -16,15 +16,14 @@ def run() -> None:
         "dynamics-dir": "F and F^-1", "translators": "where the translators go, a folder per configuration",
         "bc-data": "where the translated demonstrations go, a folder per configuration",
         "reports": "where the report <method>-d<demos>.json and its learning curve go"})
-    torch_device(p.device)  # before any job starts
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, demos_dir=args.demos_dir,
                           random_dir=args.random_dir, dynamics_dir=args.dynamics_dir,
                           translators_dir=args.translators, bc_data_dir=args.bc_data)
     group = cfgs[0].group
-    tcfg = method_config(args.method, p.translator)
+    tcfg = methods.translator_config(args.method, p.translator)
     with stage.frame(args.reports / f"{group}.json") as f:
         results = common.flatten(parallel.run_jobs(
-            translator_job, common.groups(cfgs, p.grid.workers), p.grid.workers,
+            TRANSLATOR_JOB, common.groups(cfgs, p.grid.workers), p.grid.workers,
             total=tcfg.steps * len(cfgs), desc=f"translator {group}", unit="seed-it"))
         f.report.update(stage.group_report(results))
         # held-out losses are measured every select_every iterations, diagnostics every log_every

@@ -6,8 +6,10 @@ import shutil
 
 from lfdt import parallel, stage
 from lfdt.tasks import registry
-from lfdt.twin import collect as twin_collect
 from lfdt.twin.common import SeedJob
+
+COLLECT_JOB = parallel.Job("lfdt.twin.collect", "twin_collect_job")
+"""By name: this process never imports torch or MuJoCo (its workers do, once)."""
 
 
 def run() -> None:
@@ -19,8 +21,9 @@ def run() -> None:
                      run_name=f"{task} twin_collect") as f:
         shutil.rmtree(args.data_dir / task, ignore_errors=True)
         jobs = [SeedJob(task, seed, p, all_params.device, data_root=str(args.data_dir)) for seed in p.seeds]
-        per_seed = parallel.run_jobs(twin_collect.twin_collect_job, jobs, all_params.grid.workers, total=len(jobs),
-                                     desc=f"twin_collect {task}", unit="seed")
+        per_seed = parallel.run_jobs(COLLECT_JOB, jobs, all_params.grid.workers, total=len(jobs),
+                                     desc=f"twin_collect {task}", unit="seed",
+                                     preload=())  # its jobs log nothing to MLflow: this process's frame does
         stats = {f"s{j.seed}": s for j, s in zip(jobs, per_seed, strict=True)}
         f.metrics({f"{s}/{k}/{kk}": vv for s, per in stats.items() for k, v in per.items() for kk, vv in v.items()})
         f.report.update({"task": task, "backend": p.backend, **stats})

@@ -8,8 +8,10 @@ from lfdt import parallel, stage, twin
 from lfdt.errors import InputError
 from lfdt.rig import deploy_log
 from lfdt.tasks import registry
-from lfdt.twin import evaluate as twin_evaluate
 from lfdt.twin.common import SeedJob
+
+EVALUATE_JOB = parallel.Job("lfdt.twin.evaluate", "twin_evaluate_job")
+"""By name: this process never imports torch or MuJoCo (its workers do, once)."""
 
 
 def real_trials(task: str, real_dir: str, seed: int = 0) -> list[dict]:
@@ -45,8 +47,9 @@ def run() -> None:
             jobs = [SeedJob(task, seed, p, all_params.device, models_dir=str(args.models / task / f"s{seed}"),
                                           video_dir=str(video_root) if seed == p.seeds[0] else None)
                     for seed in p.seeds]
-            rows = [r for per in parallel.run_jobs(twin_evaluate.twin_evaluate_job, jobs, all_params.grid.workers,
-                                                   total=len(jobs), desc=f"twin_evaluate {task}", unit="seed")
+            rows = [r for per in parallel.run_jobs(EVALUATE_JOB, jobs, all_params.grid.workers, total=len(jobs),
+                                                   desc=f"twin_evaluate {task}", unit="seed",
+                                                   preload=())  # its jobs log nothing: this process's frame does
                     for r in per]
         summary = {m: sum(r["success"] for r in rows if r["method"] == m) for m in twin.TWIN_METHODS}
         counts = {m: sum(r["method"] == m for r in rows) for m in twin.TWIN_METHODS}

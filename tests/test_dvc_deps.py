@@ -27,7 +27,8 @@ def module_file(name: str) -> Path | None:
 
 def imports_of(path: Path) -> set[str]:
     """Project modules a file imports (``import lfdt.x``, ``from lfdt import x``, ``from lfdt.x import y``),
-    at any place in the file (stages import lazily inside functions too)."""
+    at any place in the file (stages import lazily inside functions too), and those its jobs' workers import
+    (``parallel.Job("lfdt.x", "fn")``)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
     out: set[str] = set()
@@ -43,11 +44,19 @@ def imports_of(path: Path) -> set[str]:
                 continue
             out.add(mod)
             out |= {f"{mod}.{a.name}" for a in node.names if module_file(f"{mod}.{a.name}")}
+        elif (isinstance(node, ast.Call) and _called_name(node.func) == "Job" and node.args
+              and isinstance(node.args[0], ast.Constant) and str(node.args[0].value).split(".")[0] == PACKAGE):
+            out.add(node.args[0].value)  # lfdt.parallel.Job("lfdt.x", "fn"): its workers import lfdt.x
     # importing lfdt.a.b runs lfdt/__init__.py and lfdt/a/__init__.py first
     for m in list(out):
         parts = m.split(".")
         out |= {".".join(parts[:i]) for i in range(1, len(parts))}
     return out
+
+
+def _called_name(func: ast.expr) -> str | None:
+    """The name a call calls: ``Job`` for ``Job(...)`` and ``parallel.Job(...)``."""
+    return func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else None
 
 
 def closure(script: Path) -> set[Path]:

@@ -8,7 +8,6 @@ import pytest
 
 from lfdt import methods, report
 from lfdt.config import ParamsError, validate_params
-from lfdt.translation.model import method_config
 
 TOY = methods.Method("lfdt_no_adv", "LfDT w/o adversarial loss", "translated", translator="lfdt_no_adv",
                      overrides={"lambda_adv": 0.0}, colour="tab:green", ours=True)
@@ -36,7 +35,7 @@ def test_a_toy_method_is_one_registry_entry(toy):
                                   "bc_methods": ["bc_no_translation", "lfdt", "lfdt_no_adv"]}})
     assert "lfdt_no_adv" in methods.translator_methods()
     # the translator stage's config: its override, nothing else
-    cfg = method_config("lfdt_no_adv", p.translator)
+    cfg = methods.translator_config("lfdt_no_adv", p.translator)
     assert cfg.lambda_adv == 0.0 and cfg.model_copy(update={"lambda_adv": p.translator.lambda_adv}) == p.translator
     # the report: its row, in the registry's order, with its title and no paper value
     table = report.aggregate(_trials(["lfdt_no_adv", "bc_no_translation", "lfdt"]))

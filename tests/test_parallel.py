@@ -1,5 +1,6 @@
 """Jobs side by side in worker processes: results in job order, and no worker outlives a killed stage."""
 
+import json
 import os
 import signal
 import subprocess
@@ -10,6 +11,8 @@ from pathlib import Path
 from lfdt import parallel
 
 ROOT = Path(__file__).resolve().parents[1]
+IMPORTED_BY = os.getpid()
+"""The process that imported this module (a forkserver's worker that finds another did not import it itself)."""
 
 
 def square(job: int, progress) -> int:
@@ -98,3 +101,54 @@ def test_workers_end_when_the_stage_process_is_killed(tmp_path):
                 os.kill(int(p.read_text()), signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+WHERE = """
+import json, sys
+sys.path.insert(0, {tests!r})
+from lfdt import parallel
+import test_parallel
+print(json.dumps(parallel.run_jobs(test_parallel.where_imported, [0, 1], workers=2)))
+"""
+
+
+def where_imported(job: int, progress) -> dict:
+    """Which process imported the job's module, this worker's pid and parent's, and what MLflow it finds loaded."""
+    return {"imported_by": IMPORTED_BY, "pid": os.getpid(), "ppid": os.getppid(),
+            "modules": [m for m in ("mlflow", "mlflow.store.tracking.sqlalchemy_store") if m in sys.modules]}
+
+
+def test_the_forkserver_imports_the_jobs_module_and_mlflow_once_for_its_workers(tmp_path):
+    """The workers are forks of a server that imported the job's module and what its MLflow run imports (for the
+    default sqlite store, the SQL store too): neither worker imports them again (Python 3.11's forkserver preloads
+    nothing unless told)."""
+    from lfdt import mlflow_runs
+
+    env = {k: v for k, v in os.environ.items() if k not in ("MLFLOW_TRACKING_URI", parallel.START_METHOD_VAR)}
+    # on PYTHONPATH, as lfdt is installed: Python 3.11's server ignores the parent's sys.path (CPython gh-117378)
+    env["PYTHONPATH"] = str(ROOT / "tests")
+    out = subprocess.run([sys.executable, "-c", WHERE.format(tests=str(ROOT / "tests"))], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    workers = json.loads(out.stdout.splitlines()[-1])
+    assert len(workers) == 2
+    for w in workers:  # one worker may have run both jobs
+        assert w["imported_by"] == w["ppid"] != w["pid"], w  # the server imported it before the fork
+        assert w["modules"] == ["mlflow", "mlflow.store.tracking.sqlalchemy_store"], w
+    assert mlflow_runs.worker_modules("http://127.0.0.1:5000") == ("mlflow",)
+    assert mlflow_runs.worker_modules("postgresql+psycopg2://u@h/db")[1] == "mlflow.store.tracking.sqlalchemy_store"
+
+
+LIGHT_STAGES = ("train_translator", "track_demos", "train_bc", "twin_collect", "twin_train", "twin_evaluate")
+"""Stages that name their job (parallel.Job) and need nothing else heavy: their own process imports no torch,
+MuJoCo or MLflow store before its workers start (about 2.5 s of a small stage's start on a 2-core EPYC)."""
+
+
+def test_a_stage_that_names_its_job_starts_without_torch():
+    probe = ("import importlib, json, sys; sys.path.insert(0, 'stages'); importlib.import_module(sys.argv[1]); "
+             "print(json.dumps([m for m in ('torch', 'mujoco', 'mlflow', 'stable_baselines3') if m in sys.modules]))")
+    for name in LIGHT_STAGES:
+        out = subprocess.run([sys.executable, "-c", probe, name], cwd=ROOT, capture_output=True, text=True,
+                             timeout=60)
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert json.loads(out.stdout) == [], f"stages/{name}.py imports {out.stdout.strip()} before its workers start"

@@ -9,12 +9,13 @@ from lfdt import data, layout
 from lfdt.box_push_jobs.translator import box_push_kinematics
 from lfdt.config import EnvConfig, RandomConfig, TranslatorConfig
 from lfdt.dynamics import DynamicsModels
+from lfdt.methods import translator_config
 from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import replay_check
 from lfdt.tasks.box_push.random_motion import collect_random
 from lfdt.translation.apply import translator_diagnostics
 from lfdt.translation.losses import Losses, normalised
-from lfdt.translation.model import MeanTranslator, Translator, fit_x_normalizers, method_config
+from lfdt.translation.model import MeanTranslator, Translator, fit_x_normalizers
 from lfdt.translation.restarts import RESTART_SEED_STRIDE, train_restarts
 from lfdt.translation.training import Member, lr_factor, train_translator, train_translators
 from lfdt.translation.transitions import canonical_x_columns, load_x_transitions, split_held_out
@@ -25,14 +26,14 @@ TL = box_columns.BOX_PUSH
 
 def test_methods_are_weights_at_zero():
     base = TranslatorConfig(lambda_dyn=7.0, lambda_id=3.0)
-    assert method_config("lfdt", base) == base
-    assert method_config("lfdt_no_dyn", base).lambda_dyn == 0 and \
-        method_config("lfdt_no_dyn", base).lambda_id == 3.0
-    assert method_config("lfdt_no_id", base).lambda_id == 0
+    assert translator_config("lfdt", base) == base
+    assert translator_config("lfdt_no_dyn", base).lambda_dyn == 0 and \
+        translator_config("lfdt_no_dyn", base).lambda_id == 3.0
+    assert translator_config("lfdt_no_id", base).lambda_id == 0
     with pytest.raises(ValueError, match="unknown method 'lfdt_magic'"):
-        method_config("lfdt_magic", base)
+        translator_config("lfdt_magic", base)
     with pytest.raises(ValueError, match="trains no translator"):
-        method_config("bc_no_translation", base)
+        translator_config("bc_no_translation", base)
 
 
 def test_canonical_columns_and_robot_slot():

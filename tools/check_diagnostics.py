@@ -21,14 +21,13 @@ from pathlib import Path
 import torch
 import yaml
 
-from lfdt import layout, numerics
+from lfdt import layout, methods, numerics
 from lfdt.box_push_jobs.common import DYNAMICS_FILE, LAYOUT
 from lfdt.box_push_jobs.translator import box_push_kinematics, measure_translation, seed_demos
 from lfdt.config import load_params
 from lfdt.dynamics import load_models, load_random_y
 from lfdt.errors import InputError, StageError
 from lfdt.nets import load_state
-from lfdt.translation.model import method_config
 from lfdt.translation.training import new_translator
 from lfdt.translation.transitions import load_x_transitions
 
@@ -47,7 +46,7 @@ def recompute(root: Path, method: str, demos: int, seed: int) -> dict[str, float
     torch.set_num_threads(1)
     p = load_params(root / "params.yaml")
     paths = {k: root / v for k, v in dvc_paths(root)["paths"].items()}
-    tcfg = method_config(method, p.translator)
+    tcfg = methods.translator_config(method, p.translator)
     kin = box_push_kinematics(p.env)
     dyn = load_models(paths["dynamics"] / DYNAMICS_FILE)
     demo_paths = {pr: paths["demos"] / f"{pr}.parquet" for pr in layout.PAIRINGS}

@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 import torch
 
-from lfdt import data, layout, mlflow_runs
+from lfdt import data, layout, methods, mlflow_runs
 from lfdt.box_push_jobs.common import DATA_FILE, DYNAMICS_FILE, LAYOUT, Config, numeric
 from lfdt.config import EnvConfig
 from lfdt.dynamics import load_models, load_random_y
@@ -20,7 +20,7 @@ from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import arm_specs, replay_check
 from lfdt.translation.apply import translate_demos, translated_table, translation_diagnostics, translator_diagnostics
 from lfdt.translation.kinematics import ArmKinematics, Kinematics
-from lfdt.translation.model import MeanTranslator, method_config
+from lfdt.translation.model import MeanTranslator
 from lfdt.translation.restarts import restart_key, restart_log, restart_seed
 from lfdt.translation.training import Member, train_translators
 from lfdt.translation.transitions import Transitions, canonical_x_columns, load_x_transitions, split_held_out
@@ -32,7 +32,7 @@ def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list
     t0 = time.perf_counter()
     first = cfgs[0]
     p = first.params
-    tcfg = method_config(first.method, p.translator)
+    tcfg = methods.translator_config(first.method, p.translator)
     torch.set_num_threads(tcfg.torch_threads)
     device = torch_device(p.device)
     kin = box_push_kinematics(p.env)

@@ -10,21 +10,12 @@ import torch
 import torch.nn.functional as nnf
 from torch import nn
 
-from lfdt import layout, methods
-from lfdt.config import TranslatorConfig
+from lfdt import layout
 from lfdt.dynamics import DynamicsModels
 from lfdt.layout import TaskLayout
 from lfdt.nets import Normalizer, StackedMLP, sin_cos
 from lfdt.translation.kinematics import Kinematics
 from lfdt.translation.transitions import PAIRING_INDEX, Transitions
-
-
-def method_config(method: str, cfg: TranslatorConfig) -> TranslatorConfig:
-    """The translator config of a translator method (:mod:`lfdt.methods`; an ablation sets one weight to zero)."""
-    m = methods.get(method)
-    if not m.trains_translator:
-        raise ValueError(f"{method!r} trains no translator; translator methods: {methods.translator_methods()}")
-    return cfg.model_copy(update=m.overrides)
 
 
 class Translator(nn.Module):

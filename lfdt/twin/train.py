@@ -17,7 +17,7 @@ from lfdt.nets import save_state
 from lfdt.tasks import registry
 from lfdt.tasks.planar_env import TwinConfig
 from lfdt.translation.apply import translate_demos, translation_diagnostics
-from lfdt.translation.model import MeanTranslator, method_config
+from lfdt.translation.model import MeanTranslator
 from lfdt.translation.restarts import restart_seed, train_restarts
 from lfdt.translation.transitions import load_x_transitions, split_held_out
 from lfdt.twin import TWIN_METHODS
@@ -46,7 +46,7 @@ def train(task: str, p: TwinParams, seed: int, models_dir: str | Path, root: str
              for pr in layout.PAIRINGS}
     random_x = {pr: load_x_transitions(rec[f"random_{pr}"], pr, None, tl=tl, kind="random")
                 for pr in layout.PAIRINGS}
-    cfg = method_config("lfdt", p.translator_for(task))
+    cfg = methods.translator_config("lfdt", p.translator_for(task))
     train_demos, held = split_held_out(demos, cfg.holdout_fraction, seed)
     trs, all_stats = train_restarts(train_demos, random_x, ry.y, dyn, cfg, seed, log=log,
                                     std_floor=p.dynamics.std_floor, tl=tl, held_out=held, device=device,
@@ -89,6 +89,7 @@ def twin_train_job(job: SeedJob, progress=None) -> dict:
     from lfdt.stage import numeric
 
     p, device_name = job.params, job.device
+    device = torch_device(device_name)  # before the run opens: a machine without it is params.yaml's error
     torch.set_num_threads(1)  # each worker one core; the models' own torch_threads apply inside
     run_params = {"twin": {"seeds": p.seeds, "dynamics": p.dynamics.model_dump(),
                            "translator": p.translator_for(job.task).model_dump(),
@@ -99,7 +100,7 @@ def twin_train_job(job: SeedJob, progress=None) -> dict:
         def log(m: dict, i: int) -> None:
             run.metrics({f"translator/{k}": v for k, v in m.items()}, i)
 
-        res = train(job.task, p, job.seed, job.models_dir, job.data_root, log=log, device=torch_device(device_name),
+        res = train(job.task, p, job.seed, job.models_dir, job.data_root, log=log, device=device,
                     progress=progress)
         run.metrics(numeric({f"{k}/{kk}": vv for k, v in res.items() for kk, vv in v.items()}))
         return {**res, "mlflow_run_id": run.run_id}
