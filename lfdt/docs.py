@@ -188,16 +188,28 @@ def benchmarks(root: Path) -> str:
         lines.append(f"| the smoke DAG's `dvc repro`: spawn vs forkserver (s, wall; lower is better) | "
                      f"{sm['forkserver']:.0f} | {sm['spawn']:.0f} | "
                      f"**{ws['smoke_ratio_wall_spawn_over_forkserver']:.2f}** | |")
+    sa_path = res / "smoke_against.json"
+    sa = _read_json(sa_path) if sa_path.exists() else None
+    if sa:
+        sm = sa["median"]
+        for unit, key in (("wall", "wall_s"), ("CPU of the process tree", "cpu_s")):
+            lines.append(f"| the smoke DAG's `dvc repro --force`: this code vs commit {sa['against']} (s, {unit}; "
+                         f"lower is better) | {sm['working tree'][key]:.0f} | {sm[sa['against']][key]:.0f} | "
+                         f"**{sa['ratio_' + key.split('_')[0] + '_against_over_working_tree']:.2f}** | |")
     os_ = _read_json(res / "optimizer_start.json")
     med = os_["median"]
     lines.append(f"| a training process to its first optimizer step: torch's compiler imported (as torch's optimizer "
                  f"wrapping did) vs not (s, CPU; lower is better) | {med['without_compiler']['cpu_s']:.2f} | "
                  f"{med['with_compiler']['cpu_s']:.2f} | **{os_['ratio_cpu_with_over_without']:.2f}** | |")
+    same = "yes" if sa and all(sa["identical_outputs"].values()) else "NO"
     lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']} "
               f"({pc['cpu_isa'].upper()}), {pc['date']}, medians of {pc['repeats']}; on other CPUs where named. "
               f"Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
               f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's (or the bare server's) "
               f"time / lfdt.parallel's forkserver's. "
+              + (f"Smoke DAG against {sa['against']}: {sa['cpu_model']}, {sa['date']}, {sa['repeats']} run(s) each "
+                 f"way, alternately; outputs the same bits: {same}. "
+                 if sa else "") +
               f"Optimizer start: {os_['cpu_model']}, {os_['date']}, medians of {os_['repeats']} processes each way; "
               f"ratio = with the compiler / without."]
     return "\n".join(lines)
