@@ -119,6 +119,27 @@ def _call(fn: Callable[[Any, Progress], Any], job: Any) -> Any:
         progress.flush()
 
 
+STOP_WAIT_S = 10.0
+"""How long a worker stopped after another job failed may take to end before it is killed."""
+
+
+def _stop(pool: ProcessPoolExecutor, futures: list) -> None:
+    """Cancel the jobs not started and end the workers still running theirs: a stage whose job failed reports it now,
+    not after its other jobs have trained for minutes in vain. ProcessPoolExecutor has no public way to stop a running
+    job (its shutdown waits for them), hence its ``_processes``; SIGTERM ends a worker at once (a killed job's MLflow
+    run is marked KILLED when the rerun opens its run of the same name: :func:`lfdt.mlflow_runs.mark_killed_runs`)."""
+    for f in futures:
+        f.cancel()
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        p.terminate()
+    deadline = time.monotonic() + STOP_WAIT_S
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+
+
 def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: int, total: int | None = None,
              desc: str = "jobs", unit: str = "it", method: str | None = None,
              preload: Sequence[str] | None = None) -> list[Any]:
@@ -156,22 +177,22 @@ def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: i
 
         reader = threading.Thread(target=pump, daemon=True)
         reader.start()
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
+                                   initargs=(os.getpid(), q))
         try:
-            with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx,
-                                     initializer=_init_worker, initargs=(os.getpid(), q)) as pool:
-                futures = [pool.submit(_call, fn, job) for job in jobs]
-                wait(futures, return_when=FIRST_EXCEPTION)
-                for i, f in enumerate(futures):
-                    if f.done() and f.exception() is not None:
-                        for other in futures:
-                            other.cancel()
-                        err = f.exception()
-                        if isinstance(err, StageError):  # its message names the file or key: the stage's one line
-                            raise err
-                        raise RuntimeError(f"job {i + 1} of {len(jobs)} ({_describe(jobs[i])}) failed: "
-                                           f"{type(err).__name__}: {err}") from err
-                return [f.result() for f in futures]
+            futures = [pool.submit(_call, fn, job) for job in jobs]
+            wait(futures, return_when=FIRST_EXCEPTION)
+            for i, f in enumerate(futures):
+                if f.done() and f.exception() is not None:
+                    _stop(pool, futures)
+                    err = f.exception()
+                    if isinstance(err, StageError):  # its message names the file or key: the stage's one line
+                        raise err
+                    raise RuntimeError(f"job {i + 1} of {len(jobs)} ({_describe(jobs[i])}) failed: "
+                                       f"{type(err).__name__}: {err}") from err
+            return [f.result() for f in futures]
         finally:
+            pool.shutdown(wait=True, cancel_futures=True)  # after _stop: at once
             done.set()
             reader.join()
             while True:  # what the workers reported after the reader stopped

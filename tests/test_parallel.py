@@ -152,3 +152,33 @@ def test_a_stage_that_names_its_job_starts_without_torch():
                              timeout=60)
         assert out.returncode == 0, out.stderr[-2000:]
         assert json.loads(out.stdout) == [], f"stages/{name}.py imports {out.stdout.strip()} before its workers start"
+
+
+def fail_at_once_or_sleep(job: tuple[str, int], progress) -> int:
+    """Job 0 fails at once; job 1 says it started (its pid), then would run 60 s and write that it finished."""
+    out, i = job
+    if i == 0:
+        deadline = time.monotonic() + 30
+        while not Path(out, "pid1").exists() and time.monotonic() < deadline:  # the other job has started
+            time.sleep(0.05)
+        raise ValueError("zero is bad")
+    Path(out, "pid1").write_text(str(os.getpid()))
+    time.sleep(60)
+    Path(out, "done1").write_text("finished in vain")
+    return i
+
+
+def test_a_failing_job_stops_the_others_at_once(tmp_path):
+    """The stage reports a failed job without waiting for the others to finish theirs (they could train for
+    minutes), and ends their workers."""
+    import pytest
+
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match=r"job 1 of 2 .* failed: ValueError: zero is bad"):
+        parallel.run_jobs(fail_at_once_or_sleep, [(str(tmp_path), 0), (str(tmp_path), 1)], workers=2)
+    assert time.monotonic() - t0 < 30, "the stage waited for the other job"
+    pid = int((tmp_path / "pid1").read_text())
+    deadline = time.monotonic() + 10
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _alive(pid) and not (tmp_path / "done1").exists()
