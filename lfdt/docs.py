@@ -205,8 +205,8 @@ def benchmarks(root: Path) -> str:
     lines += ["", f"Stacking: {st['cpu_model']}, {st['date']}, medians of {st['repeats']}. Pin: {pc['cpu_model']} "
               f"({pc['cpu_isa'].upper()}), {pc['date']}, medians of {pc['repeats']}; on other CPUs where named. "
               f"Workers' start: {ws['cpu_model']}, {ws['date']}, medians of "
-              f"{ws['repeats']} (smoke DAG: {ws['smoke_runs']} run each way); ratio = spawn's (or the bare server's) "
-              f"time / lfdt.parallel's forkserver's. "
+              f"{ws['repeats']}" + (f" (smoke DAG: {ws['smoke_runs']} run each way)" if ws.get("smoke_runs") else "")
+              + "; ratio = spawn's (or the bare server's) time / lfdt.parallel's forkserver's. "
               + (f"Smoke DAG against {sa['against']}: {sa['cpu_model']}, {sa['date']}, {sa['repeats']} run(s) each "
                  f"way, alternately; outputs the same bits: {same}. "
                  if sa else "") +
