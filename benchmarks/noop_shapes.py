@@ -52,8 +52,9 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
-def checkout(rev: str | None, dst: Path) -> Path:
-    """The files of ``rev`` (None: this working tree) in ``dst``, with the tiny params, as a git + DVC project."""
+def checkout(rev: str | None, dst: Path, demos: list[int] | None = DEMOS, repro: bool = True) -> Path:
+    """The files of ``rev`` (None: this working tree) in ``dst``, with the tiny params, as a git + DVC project:
+    ``demos`` the grid's demo counts (None: the smoke params' own), reproduced once when ``repro``."""
     dst.mkdir(parents=True)
     if rev is None:
         for name in FILES:
@@ -68,12 +69,14 @@ def checkout(rev: str | None, dst: Path) -> Path:
         tarfile.open(fileobj=io.BytesIO(archive)).extractall(dst, filter="data")
     params = _merge(yaml.safe_load((dst / "params.yaml").read_text()),
                     yaml.safe_load((dst / "tests/smoke_params.yaml").read_text()))
-    params["grid"]["demos"] = DEMOS
+    if demos is not None:
+        params["grid"]["demos"] = demos
     (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     _run(["git", "init", "-q"], dst)
     _run(["dvc", "init", "-q"], dst)
     _run(["dvc", "config", "core.analytics", "false"], dst)
-    _run(["dvc", "repro", "-q"], dst)
+    if repro:
+        _run(["dvc", "repro", "-q"], dst)
     return dst
 
 

@@ -25,41 +25,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-import yaml
-from noop_shapes import FILES, ROOT, _merge, _run
+from noop_shapes import ROOT, _run, checkout
 from worker_start import _timed
 
 from lfdt import numerics
 
 COMPARED = ("reports/table1.csv", "reports/table1_runs.csv", "reports/twin_runs.csv", "reports/fingerprint.json")
 """Outputs both versions must write byte for byte alike."""
-
-
-def checkout(rev: str | None, dst: Path) -> Path:
-    """The files of ``rev`` (None: this working tree) in ``dst`` with the smoke params, as a git + DVC project."""
-    import io
-    import shutil
-    import subprocess
-    import tarfile
-
-    dst.mkdir(parents=True)
-    if rev is None:
-        for name in FILES:
-            src = ROOT / name
-            if src.is_dir():
-                shutil.copytree(src, dst / name, ignore=shutil.ignore_patterns("__pycache__"))
-            else:
-                (dst / name).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy(src, dst / name)
-    else:
-        archive = subprocess.run(["git", "archive", rev, *FILES], cwd=ROOT, capture_output=True, check=True).stdout
-        tarfile.open(fileobj=io.BytesIO(archive)).extractall(dst, filter="data")
-    params = _merge(yaml.safe_load((dst / "params.yaml").read_text()),
-                    yaml.safe_load((dst / "tests/smoke_params.yaml").read_text()))
-    (dst / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    for args in (["git", "init", "-q"], ["dvc", "init", "-q"], ["dvc", "config", "core.analytics", "false"]):
-        _run(args, dst)
-    return dst
 
 
 def timed_repro(cwd: Path) -> tuple[float, float]:
@@ -77,7 +49,9 @@ def main() -> None:
     args = ap.parse_args()
     rev = _run(["git", "rev-parse", "--short", args.against], ROOT).strip()
     with tempfile.TemporaryDirectory() as tmp:
-        versions = {"working tree": checkout(None, Path(tmp) / "new"), rev: checkout(rev, Path(tmp) / "old")}
+        # the smoke params as they are (their own demo counts), built by the timed runs
+        versions = {name: checkout(r, Path(tmp) / d, demos=None, repro=False)
+                    for name, r, d in (("working tree", None, "new"), (rev, rev, "old"))}
         times: dict[str, dict[str, list[float]]] = {k: {"wall_s": [], "cpu_s": []} for k in versions}
         for _ in range(args.repeats):
             for name, cwd in versions.items():
