@@ -3,6 +3,7 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+UI_PORT ?= 5000
 
 .PHONY: help setup reproduce test lint smoke benchmarks docs cross-cpu mlflow-ui ui-check clean-venv
 
@@ -50,9 +51,9 @@ docs: setup  ## write the numbers of README.md and docs/ from reports/ and bench
 cross-cpu: setup  ## the numeric fingerprint on this CPU and on CPUs emulated by QEMU (needs qemu-user)
 	$(BIN)/python tools/cross_cpu.py --models Haswell EPYC Skylake-Client EPYC-Rome
 
-mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000 (prints the URLs of Table I's views first)
-	$(BIN)/python -m lfdt.mlflow_views --ui http://127.0.0.1:5000
-	$(BIN)/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
+mlflow-ui: setup  ## browse every run at http://127.0.0.1:5000 (UI_PORT=N: another port; prints the URLs of the views first)
+	$(BIN)/python -m lfdt.mlflow_views --port-free --ui http://127.0.0.1:$(UI_PORT)
+	$(BIN)/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port $(UI_PORT)
 
 ui-check: setup  ## open the MLflow views in headless Chromium, check what they show, screenshots in docs/mlflow-ui/
 	$(BIN)/python tools/mlflow_ui_check.py

@@ -130,9 +130,38 @@ def install(experiment: str | None = None) -> tuple[str, dict[str, tuple[View, d
 def main(argv: list[str] | None = None) -> int:
     ap = ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ui", default="http://127.0.0.1:5000", help="where the MLflow UI is (for the printed URLs)")
+    ap.add_argument("--port-free", action="store_true",
+                    help="first check that nothing listens on --ui's port here (make mlflow-ui starts the UI there "
+                         "next: the URLs would otherwise open whatever already serves it)")
     args = ap.parse_args(argv)
+
+    def run() -> int:
+        if args.port_free:
+            port_free(args.ui)
+        return _report(*install(), args.ui)
+
     # the store or LFDT_MLFLOW_EXPERIMENT: one line naming it, as a stage says it
-    return one_line_errors(lambda: _report(*install(), args.ui), "the views already saved stay; rerun to add the rest")
+    return one_line_errors(run, "the views already saved stay; rerun to add the rest")
+
+
+def port_free(ui: str) -> None:
+    """InputError when a server already listens on ``ui``'s host and port on this machine (say, another project's
+    ``make mlflow-ui``): the UI about to start there could not bind, and the printed URLs would open the other one."""
+    import errno
+    import socket
+
+    from lfdt.errors import InputError
+    from lfdt.reach import host_port
+
+    host, port = host_port(ui, default_port=80)
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            if e.errno != errno.EADDRINUSE:
+                raise
+            raise InputError(f"{host}:{port} is in use (another `make mlflow-ui`?): stop that server, or serve this "
+                             f"one on another port: make mlflow-ui UI_PORT={port + 1}") from None
 
 
 def _report(exp_id: str, urls: dict, ui: str) -> int:

@@ -207,7 +207,7 @@ def deploy(ctx: Ctx) -> int | None:
 def views(ctx: Ctx) -> int | None:
     from lfdt.mlflow_views import main
 
-    return main([])
+    return main(ctx.args)
 
 
 def _predict(make_error: Callable[[], BaseException]) -> int | None:
@@ -319,6 +319,8 @@ CASES = [
     ("experiment-too-long-views", views, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db",
                                           "LFDT_MLFLOW_EXPERIMENT": LONG_NAME}, [],
      ["LFDT_MLFLOW_EXPERIMENT is 600 characters long", "at most 256"]),
+    ("ui-port-taken", views, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db"},
+     ["--port-free", "--ui", "http://{http503}"], ["{http503} is in use", "make mlflow-ui UI_PORT="]),
     ("experiment-newline", stage_start, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db",
                                          "LFDT_MLFLOW_EXPERIMENT": "lfdt\nsecond line"}, [],
      ["LFDT_MLFLOW_EXPERIMENT=", "control character"]),

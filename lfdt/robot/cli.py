@@ -56,6 +56,23 @@ def episode_count(text: str) -> int:
     return value
 
 
+MAX_EPISODE_STEPS = 100_000
+"""The longest episode or trial, in control steps: 2.8 hours at the twin's 0.1 s control period. A recording keeps
+an episode's rows in memory until the episode ends (about 3 KB a step on the twin, measured), so a mistyped count
+would fill the memory over hours before anything is written; longer motion is more episodes."""
+
+
+def episode_steps(text: str) -> int:
+    """argparse type: control steps of one episode or trial (:func:`positive_int` at most
+    :data:`MAX_EPISODE_STEPS`)."""
+    value = positive_int(text)
+    if value > MAX_EPISODE_STEPS:
+        raise argparse.ArgumentTypeError(f"{value} is more than the {MAX_EPISODE_STEPS} control steps an episode "
+                                         f"may have (its rows are held in memory until it ends); record longer "
+                                         f"motion as more episodes")
+    return value
+
+
 def _check_room(first: int, count: int, option: str, where: str) -> None:
     """Episodes ``first`` .. ``first + count - 1`` each have a start state (:data:`lfdt.seeding.MAX_EPISODES` per
     seed); an InputError naming ``option`` and what ``where`` holds already otherwise, before anything moves."""
@@ -388,7 +405,7 @@ def add_record_random_parser(subparsers) -> None:
     add_rig_arguments(p)
     p.add_argument("--domain", required=True, choices=("Y", "R1H", "HR2"))
     p.add_argument("--episodes", type=episode_count, required=True, metavar="N", help="episodes to record")
-    p.add_argument("--steps", type=positive_int, required=True, metavar="T", help="control steps per episode")
+    p.add_argument("--steps", type=episode_steps, required=True, metavar="T", help="control steps per episode")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
     p.add_argument("--reach", type=positive_float, default=0.008, metavar="M",
@@ -446,7 +463,7 @@ def add_record_demos_parser(subparsers) -> None:
     p.add_argument("--episodes", type=episode_count, required=True, metavar="N",
                    help="successful demonstrations to keep")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="recording directory")
-    p.add_argument("--steps", type=positive_int, default=40, metavar="T",
+    p.add_argument("--steps", type=episode_steps, default=40, metavar="T",
                    help="longest episode, control steps (default: 40, the twin's episode)")
     p.add_argument("--max-attempts", type=episode_count, metavar="M", help="give up after M attempts (default: 5 N)")
     p.add_argument("--seed", type=int, default=0, choices=range(10), metavar="S", help="seed 0..9 (default: 0)")
