@@ -10,34 +10,75 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
+import io
 import re
 import statistics
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from lfdt import methods
+from lfdt import inputs, methods
+from lfdt.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ("README.md", "docs/results.md", "docs/experiments.md", "docs/benchmarks.md")
 """The pages that hold generated blocks."""
 
 
+EXPECTED = "the file the pipeline (or the tool that writes it) wrote: run it again, or `git checkout -- FILE`"
+"""What every report the pages are written from must be (the one line of a refusal ends with it)."""
+
+
+def _read_text(path: Path) -> str:
+    """A report's UTF-8 text; a missing, unreadable or not-UTF-8 file is an InputError naming it."""
+    return inputs.read_text(path, "report", EXPECTED)
+
+
 def _read_json(path: Path) -> dict:
-    if not path.exists():
-        raise FileNotFoundError(f"{path.relative_to(ROOT)} is missing: run the pipeline (or the tool that writes it)")
-    return json.loads(path.read_text())
+    """A report's JSON object (:func:`lfdt.inputs.json_object`: empty, cut-short or not-an-object files named)."""
+    return inputs.json_object(path, "report", EXPECTED)
+
+
+def _read_rows(path: Path, columns: tuple[str, ...] = ()) -> list[dict[str, str]]:
+    """A CSV report's rows (at least one) as dicts of its header's columns, which include ``columns``. A row with
+    more or fewer fields than the header (a file cut short mid-row, a stray comma), a header without rows or without
+    a column a block reads is an InputError naming the file: a partial report must never become a partial table on
+    a page."""
+    reader = csv.reader(io.StringIO(_read_text(path)))
+    header = next(reader, None)
+    if not header:
+        raise InputError(f"report {path}: has no header line; expected {EXPECTED}")
+    missing = [c for c in columns if c not in header]
+    if missing:
+        raise InputError(f"report {path}: its header has no column {', '.join(map(repr, missing))}; expected "
+                         f"{EXPECTED}")
+    rows = []
+    for row in reader:
+        if not row:
+            continue
+        if len(row) != len(header):
+            raise InputError(f"report {path}, line {reader.line_num}: {len(row)} fields where its header has "
+                             f"{len(header)} (cut short?); expected {EXPECTED}")
+        rows.append(dict(zip(header, row)))
+    if not rows:
+        raise InputError(f"report {path}: holds a header and no rows; expected {EXPECTED}")
+    return rows
 
 
 def table1(root: Path) -> str:
     """Table I and the paired differences, as the report stage wrote them (reports/table1.md)."""
-    return (root / "reports" / "table1.md").read_text().strip()
+    return _read_text(root / "reports" / "table1.md").strip()
+
+
+TABLE1_COLUMNS = ("method", "demos", "success_rate", "worst_seed", "ci95_low", "ci95_high", "diff_vs_bc_no_translation",
+                  "diff_ci95_low", "diff_ci95_high")
+"""The columns of reports/table1.csv the headline reads (the path rule's, ``path_*``, only where the report has them:
+reports of earlier versions lack them)."""
 
 
 def headline(root: Path) -> str:
     """LfDT and BC without translation in one sentence per demo count and success rule, from reports/table1.csv."""
-    rows = list(csv.DictReader((root / "reports" / "table1.csv").open()))
+    rows = _read_rows(root / "reports" / "table1.csv", TABLE1_COLUMNS)
     by = {(r["method"], int(r["demos"])): r for r in rows}
     sentences = []
     for pre, rule in (("", "end-state rule"), ("path_", "path rule")):
@@ -102,7 +143,7 @@ def cross_cpu(root: Path) -> str:
 def run_time(root: Path) -> str:
     """The full pipeline's wall time per stage (reports/stage_times.csv) and in all (reports/run_time.json)."""
     doc = _read_json(root / "reports" / "run_time.json")
-    rows = list(csv.DictReader((root / "reports" / "stage_times.csv").open()))
+    rows = _read_rows(root / "reports" / "stage_times.csv", ("stage", "runs", "total_s"))
     lines = ["| stage | runs | minutes |", "| --- | --- | --- |"]
     for r in rows:
         lines.append(f"| {r['stage']} | {r['runs']} | {float(r['total_s']) / 60:.1f} |")
@@ -131,7 +172,7 @@ def run_time_line(root: Path) -> str:
 
 def twin(root: Path) -> str:
     """The twin's results as its report stage wrote them (reports/twin.md), headings one level down."""
-    text = (root / "reports" / "twin.md").read_text().strip()
+    text = _read_text(root / "reports" / "twin.md").strip()
     return re.sub(r"(?m)^#", "##", text)
 
 
@@ -139,7 +180,7 @@ def translator_diagnostics(root: Path) -> str:
     """The translator diagnostics per (method, demos), from reports/translator_diagnostics.csv."""
     from lfdt.report import DIAGNOSTICS
 
-    rows = list(csv.DictReader((root / "reports" / "translator_diagnostics.csv").open()))
+    rows = _read_rows(root / "reports" / "translator_diagnostics.csv", ("method", "demos", "selected_iteration"))
     rows = [r for r in rows if r.get("selected_iteration")]
     head = "| diagnostic | " + " | ".join(f"{r['method']} d{r['demos']}" for r in rows) + " |"
     lines = [head, "| --- |" + " --- |" * len(rows)]
@@ -237,7 +278,7 @@ does, what the paper's does)."""
 
 def ablation_caption(root: Path) -> str:
     """Table I's caption for the ablation rows: where ours deviates and the paper-faithful variant's number."""
-    rows = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())}
+    rows = {r["trial"]: r for r in _read_rows(root / "docs" / "experiments" / "trials.csv")}
     parts = []
     for method, (ours, paper, ours_is, paper_is) in ABLATION_VARIANTS.items():
         a, b = rows[ours], rows[paper]
@@ -258,7 +299,7 @@ def experiments(root: Path, only: tuple[str, ...] | None = None, diagnostics: tu
     """Every development trial (docs/experiments/trials.csv), one row per trial and method (``only``: those trials,
     in that order, with the mean over seeds of each of ``diagnostics`` from the trial's seeds file)."""
     path = root / "docs" / "experiments" / "trials.csv"
-    rows = list(csv.DictReader(path.open()))
+    rows = _read_rows(path)
     if only is not None:
         rows = sorted((r for r in rows if r["trial"] in only), key=lambda r: only.index(r["trial"]))
         rows = [r for r in rows if r["method"] != "bc_no_translation" or r["trial"] == only[0]]
@@ -296,7 +337,7 @@ def _outcome_rows(root: Path, trial: str, method: str, demos: int | str = 100) -
     path = root / "docs" / "experiments" / "outcomes" / f"{trial}_{method}-d{demos}.csv"
     if not path.exists():
         return None
-    return {int(r["seed"]): [int(c) for c in r["outcomes"]] for r in csv.DictReader(path.open())}
+    return {int(r["seed"]): [int(c) for c in r["outcomes"]] for r in _read_rows(path)}
 
 
 def _outcomes(root: Path, trial: str, method: str, demos: int = 100) -> dict[int, float]:
@@ -333,7 +374,7 @@ def _seed_mean(root: Path, trial: str, method: str, key: str) -> str:
     if not path.exists():
         return "–"
     translator = methods.get(method).translator
-    vals = [float(r[key]) for r in csv.DictReader(path.open())
+    vals = [float(r[key]) for r in _read_rows(path)
             if r.get("stage") == "translator" and r.get("method") == translator and r.get(key) not in (None, "")]
     return f"{sum(vals) / len(vals):.4g}" if vals else "–"
 
@@ -347,7 +388,7 @@ def issue37(root: Path) -> str:
     """Issue 37's development trials, both success rules, with what they were about: how far the replacing robot
     pushes further out across the box than the hand did, its distance to the hand, the open-loop replay of the
     labels, and F's error on two-arm pushes across the box and in yaw (a share of predicting no change)."""
-    rows = [r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+    rows = [r for r in _read_rows(root / "docs" / "experiments" / "trials.csv")
             if r["trial"].startswith(ISSUE37_PREFIX) and not _in_a_search(root, r["trial"])
             and r["trial"] not in {t for pair in CONFIRMATIONS for t in pair}]
     lines = ["| trial | change | method | demos | success (worst seed) | path rule (worst seed) | path rule: vs BC "
@@ -431,12 +472,12 @@ def search(root: Path) -> str:
     and outcomes, and the best trial's paired difference from the baseline trial (the same seeds and start states)."""
 
 
-    trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+    trials = {r["trial"]: r for r in _read_rows(root / "docs" / "experiments" / "trials.csv")
               if r["method"] == "lfdt"}
     out = []
     for path in sorted((root / "docs" / "experiments").glob("search_*.csv")):
         study = path.stem[len("search_"):]
-        rows = list(csv.DictReader(path.open()))
+        rows = _read_rows(path)
         if not rows:
             continue
         knobs = [k for k in rows[0] if k.startswith("translator.")]
@@ -508,7 +549,7 @@ def confirm(root: Path) -> str:
     difference from the baseline over the same seeds and start states, with its 95 % interval."""
 
 
-    trials = {r["trial"]: r for r in csv.DictReader((root / "docs" / "experiments" / "trials.csv").open())
+    trials = {r["trial"]: r for r in _read_rows(root / "docs" / "experiments" / "trials.csv")
               if r["method"] == "lfdt"}
     lines = ["| candidate | baseline | demos | seeds | candidate: success (worst seed) | baseline: success (worst "
              "seed) | difference (95 % interval) | path rule: difference (95 % interval) | replacing robot further out "
@@ -550,8 +591,14 @@ def render_page(text: str, root: Path = ROOT) -> str:
     def sub(m: re.Match) -> str:
         name = m.group(2)
         if name not in BLOCKS:
-            raise KeyError(f"unknown generated block {name!r}; known: {sorted(BLOCKS)}")
-        return f"{m.group(1)}{BLOCKS[name](root)}\n{m.group(4)}"
+            raise InputError(f"unknown generated block {name!r}; known: {sorted(BLOCKS)}")
+        try:
+            block = BLOCKS[name](root)
+        except (KeyError, ValueError, IndexError) as err:
+            # a report of another version, or a value edited by hand: a column missing, text where a number belongs
+            raise InputError(f"generated block {name!r}: its reports do not hold what it reads ({type(err).__name__}: "
+                             f"{err}); expected {EXPECTED}") from err
+        return f"{m.group(1)}{block}\n{m.group(4)}"
 
     return _BLOCK.sub(sub, text)
 
@@ -572,25 +619,31 @@ def stale(root: Path = ROOT) -> list[str]:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(argv: list[str] | None = None, root: Path = ROOT) -> int:
+    """``python -m lfdt.docs [--check]``: rewrite the pages' generated blocks (or name the stale ones, exit 1). A
+    report that is missing, cut short or not what a block reads is one line naming it, exit 2, and no page is
+    written: every page is rendered before the first is replaced."""
+    ap = inputs.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--check", action="store_true", help="exit 1 if a page disagrees with its reports; write nothing")
-    args = ap.parse_args()
-    if args.check:
-        bad = stale()
-        if bad:
-            print("stale generated blocks (run `make docs`): " + ", ".join(bad), file=sys.stderr)
-            sys.exit(1)
-        return
-    for page in PAGES:
-        path = ROOT / page
-        if path.exists():
-            text = path.read_text()
-            new = render_page(text)
-            if new != text:
-                path.write_text(new)
+    args = ap.parse_args(argv)
+
+    def run() -> int:
+        if args.check:
+            bad = stale(root)
+            if bad:
+                print("stale generated blocks (run `make docs`): " + ", ".join(bad), file=sys.stderr)
+                return 1
+            return 0
+        pages = {page: (root / page).read_text() for page in PAGES if (root / page).exists()}
+        new = {page: render_page(text, root) for page, text in pages.items()}
+        for page, text in new.items():
+            if text != pages[page]:
+                (root / page).write_text(text)
                 print(f"updated {page}")
+        return 0
+
+    return inputs.one_line_errors(run, "no page was written unless it says 'updated'")
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

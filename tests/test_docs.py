@@ -2,11 +2,15 @@
 
 import lfdt.numerics  # noqa: F401
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from lfdt import docs
+from lfdt.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_generated_block_agrees_with_its_reports():
@@ -25,7 +29,7 @@ def test_a_block_that_disagrees_is_named(tmp_path: Path):
 
 
 def test_an_unknown_block_is_an_error():
-    with pytest.raises(KeyError, match="unknown generated block 'nope'"):
+    with pytest.raises(InputError, match="unknown generated block 'nope'"):
         docs.render_page("<!-- generated:nope -->\n<!-- /generated:nope -->\n")
 
 
@@ -77,3 +81,58 @@ def test_a_confirmation_block_pairs_candidate_and_baseline_by_both_rules(tmp_pat
     assert "| c (translator.lambda_dyn=3.0) | b (params.yaml) | 50 | 45 46 | 75.0 % (50.0 %) | 37.5 % (25.0 %) | " \
            "+25.0 (" in block, block
     assert block.count("\n| ") == 2 and "| +0.0 (" in block and "Some CPU (pinned)" in block, block
+
+
+# -------------------------------------------------------------------------------- reports that are not what they were
+
+PAGE = ("x\n<!-- generated:headline -->\nold\n<!-- /generated:headline -->\n"
+        "<!-- generated:run_time -->\nold\n<!-- /generated:run_time -->\n")
+"""A page with the blocks of reports/table1.csv, run_time.json and stage_times.csv."""
+TABLE1 = "reports/table1.csv"
+
+
+def _cut(name: str, keep: float) -> Callable[[Path], None]:
+    return lambda root: (root / name).write_bytes((root / name).read_bytes()[:int(len((root / name).read_bytes())
+                                                                                     * keep)])
+
+
+def _replace(name: str, old: str, new: str) -> Callable[[Path], None]:
+    def damage(root: Path) -> None:
+        text = (root / name).read_text()
+        assert old in text, old
+        (root / name).write_text(text.replace(old, new, 1))
+    return damage
+
+
+HOSTILE_REPORTS = [
+    # (id, what is done to the reports, what the one line must say)
+    ("missing", lambda root: (root / TABLE1).unlink(), "report {root}/reports/table1.csv: no such file"),
+    ("empty", lambda root: (root / TABLE1).write_text(""), "report {root}/reports/table1.csv: has no header line"),
+    ("cut-mid-row", _cut(TABLE1, 0.5), "report {root}/reports/table1.csv, line "),
+    ("header-only", lambda root: (root / "reports/stage_times.csv").write_text("stage,runs,total_s,mean_s\n"),
+     "report {root}/reports/stage_times.csv: holds a header and no rows"),
+    ("column-renamed", _replace(TABLE1, "success_rate,", "succ_rate,"), "its header has no column 'success_rate'"),
+    ("text-for-a-number", _replace(TABLE1, "\nlfdt,50,", "\nlfdt,fifty,"),
+     "generated block 'headline': its reports do not hold what it reads (ValueError"),
+    ("not-utf8", lambda root: (root / TABLE1).write_bytes(b"method,\xffdemos\n"), "line 1: byte 0xff"),
+    ("json-cut", _cut("reports/run_time.json", 0.5), "report {root}/reports/run_time.json: is not JSON"),
+    ("json-a-list", lambda root: (root / "reports/run_time.json").write_text("[]"), "holds a JSON list, not an object"),
+]
+
+
+@pytest.mark.parametrize(("damage", "says"), [c[1:] for c in HOSTILE_REPORTS], ids=[c[0] for c in HOSTILE_REPORTS])
+def test_a_damaged_report_is_one_named_error_and_no_page_changes(tmp_path: Path, damage, says, capsys):
+    """`make docs` after a run cut short or a report edited by hand: exit 2, one line naming the report, the page
+    left as it was (never a partial table)."""
+    (tmp_path / "reports").mkdir()
+    for name in (TABLE1, "reports/run_time.json", "reports/stage_times.csv"):
+        (tmp_path / name).write_bytes((ROOT / name).read_bytes())
+    (tmp_path / "README.md").write_text(PAGE)
+    assert docs.main([], root=tmp_path) == 0 and "old" not in (tmp_path / "README.md").read_text()
+    (tmp_path / "README.md").write_text(PAGE)
+    capsys.readouterr()
+    damage(tmp_path)
+    assert docs.main([], root=tmp_path) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and says.format(root=tmp_path) in err[0], err
+    assert (tmp_path / "README.md").read_text() == PAGE
