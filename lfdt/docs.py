@@ -39,11 +39,11 @@ def _read_json(path: Path) -> dict:
     return inputs.json_object(path, "report", EXPECTED)
 
 
-def _read_rows(path: Path, columns: tuple[str, ...] = ()) -> list[dict[str, str]]:
-    """A CSV report's rows (at least one) as dicts of its header's columns, which include ``columns``. A row with
-    more or fewer fields than the header (a file cut short mid-row, a stray comma), a header without rows or without
-    a column a block reads is an InputError naming the file: a partial report must never become a partial table on
-    a page."""
+def _read_rows(path: Path, columns: tuple[str, ...] = (), empty_ok: bool = False) -> list[dict[str, str]]:
+    """A CSV report's rows (at least one, unless ``empty_ok``) as dicts of its header's columns, which include
+    ``columns``. A row with more or fewer fields than the header (a file cut short mid-row, a stray comma), a header
+    without rows or without a column a block reads is an InputError naming the file: a partial report must never
+    become a partial table on a page."""
     reader = csv.reader(io.StringIO(_read_text(path)))
     header = next(reader, None)
     if not header:
@@ -60,7 +60,7 @@ def _read_rows(path: Path, columns: tuple[str, ...] = ()) -> list[dict[str, str]
             raise InputError(f"report {path}, line {reader.line_num}: {len(row)} fields where its header has "
                              f"{len(header)} (cut short?); expected {EXPECTED}")
         rows.append(dict(zip(header, row)))
-    if not rows:
+    if not rows and not empty_ok:
         raise InputError(f"report {path}: holds a header and no rows; expected {EXPECTED}")
     return rows
 
@@ -477,7 +477,7 @@ def search(root: Path) -> str:
     out = []
     for path in sorted((root / "docs" / "experiments").glob("search_*.csv")):
         study = path.stem[len("search_"):]
-        rows = _read_rows(path)
+        rows = _read_rows(path, empty_ok=True)  # a study whose first trial has not finished yet
         if not rows:
             continue
         knobs = [k for k in rows[0] if k.startswith("translator.")]

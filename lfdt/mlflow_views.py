@@ -155,6 +155,8 @@ def port_free(ui: str) -> None:
 
     host, port = host_port(ui, default_port=80)
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        # as the UI's server binds: a connection of a UI stopped a moment ago (TIME_WAIT) does not hold the port
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host, port))
         except OSError as e:

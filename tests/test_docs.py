@@ -136,3 +136,13 @@ def test_a_damaged_report_is_one_named_error_and_no_page_changes(tmp_path: Path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and says.format(root=tmp_path) in err[0], err
     assert (tmp_path / "README.md").read_text() == PAGE
+
+
+def test_a_search_without_a_finished_trial_is_left_out_not_an_error(tmp_path: Path):
+    """tools/dev_search.py writes its table's header before the first trial ends; `make docs` meanwhile goes on."""
+    exp = tmp_path / "docs" / "experiments"
+    exp.mkdir(parents=True)
+    (exp / "trials.csv").write_text("date,trial,method,demos,seeds,cpu_model,numerics\n"
+                                    "2026-12-06,t,lfdt,50,40,Some CPU,pinned\n")
+    (exp / "search_st-new.csv").write_text("trial,baseline,repeat_of,translator.lambda_dyn,success_pct\n")
+    assert "st-new" not in docs.search(tmp_path)

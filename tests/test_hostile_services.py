@@ -415,3 +415,21 @@ def test_ctrl_c_or_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, c
         assert code == 130 and errors[0].startswith("error: interrupted (Ctrl-C): "), stderr
     else:
         assert code == 2 and errors[0] == f"error: {tmp_path / 'out.json'}: No space left on device", stderr
+
+
+def test_a_ui_port_freed_a_moment_ago_counts_as_free():
+    """`make mlflow-ui` right after the last one stopped: that server's closed connections (TIME_WAIT) do not hold
+    its port, for the UI's server nor for the check before it; a listening server does."""
+    from lfdt.errors import InputError
+    from lfdt.mlflow_views import port_free
+
+    port = services.free_port()
+    server = socket.create_server(("127.0.0.1", port))
+    client = socket.create_connection(("127.0.0.1", port))
+    conn, _ = server.accept()
+    with pytest.raises(InputError, match=f"127.0.0.1:{port} is in use"):
+        port_free(f"http://127.0.0.1:{port}")
+    conn.close()  # the server's side closes first: its end of the connection waits in TIME_WAIT on the port
+    server.close()
+    client.close()
+    port_free(f"http://127.0.0.1:{port}")
