@@ -92,8 +92,10 @@ TABLE1 = "reports/table1.csv"
 
 
 def _cut(name: str, keep: float) -> Callable[[Path], None]:
-    return lambda root: (root / name).write_bytes((root / name).read_bytes()[:int(len((root / name).read_bytes())
-                                                                                     * keep)])
+    def damage(root: Path) -> None:
+        data = (root / name).read_bytes()
+        (root / name).write_bytes(data[:int(len(data) * keep)])
+    return damage
 
 
 def _replace(name: str, old: str, new: str) -> Callable[[Path], None]:
