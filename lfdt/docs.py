@@ -104,9 +104,8 @@ def headline(root: Path) -> str:
         sentences.append(f"By the {rule}: " + "; ".join(parts) + ". LfDT against BC without translation (the "
                          f"paper's finding is 'better' at every demo count), judged by whether the paired interval "
                          f"excludes 0: {said}.")
-    seeds = rows[0]["seeds"] if rows else "?"
-    trials = rows[0]["trials_per_seed"] if rows else "?"
-    return f"Over {seeds} training seeds x {trials} evaluation start states per cell. " + " ".join(sentences)
+    return (f"Over {rows[0]['seeds']} training seeds x {rows[0]['trials_per_seed']} evaluation start states per cell. "
+            + " ".join(sentences))
 
 
 def cross_cpu(root: Path) -> str:

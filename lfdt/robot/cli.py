@@ -57,13 +57,13 @@ def episode_count(text: str) -> int:
 
 
 MAX_EPISODE_STEPS = 100_000
-"""The longest episode or trial, in control steps: 2.8 hours at the twin's 0.1 s control period. A recording keeps
+"""The longest recorded episode, in control steps: 2.8 hours at the twin's 0.1 s control period. A recording keeps
 an episode's rows in memory until the episode ends (about 3 KB a step on the twin, measured), so a mistyped count
 would fill the memory over hours before anything is written; longer motion is more episodes."""
 
 
 def episode_steps(text: str) -> int:
-    """argparse type: control steps of one episode or trial (:func:`positive_int` at most
+    """argparse type: control steps of one recorded episode (:func:`positive_int` at most
     :data:`MAX_EPISODE_STEPS`)."""
     value = positive_int(text)
     if value > MAX_EPISODE_STEPS:
