@@ -107,14 +107,51 @@ def write_table(table: pa.Table, path: str | Path) -> Path:
 
 
 def _first_file(path: str | Path) -> Path:
-    """A Parquet file itself, or the first file of a directory of Parquet files (a recording)."""
+    """A Parquet file itself, or the first file of a directory of Parquet files (a recording), every file of which
+    is checked to hold the same columns and the same kind, domain and task as the first (:func:`_directory_files`)."""
     path = Path(path)
-    if path.is_dir():
-        files = sorted(path.glob("*.parquet"))
-        if not files:
-            raise FileNotFoundError(f"no Parquet files in {path}")
-        return files[0]
-    return path
+    return _directory_files(path)[0] if path.is_dir() else path
+
+
+IDENTITY_KEYS = ("kind", "domain", "task")
+"""Metadata every file of one directory of transitions (a recording) shares."""
+
+
+def _directory_files(path: Path) -> list[Path]:
+    """The Parquet files of a directory (a recording: one file per episode), in order; a DataFileError naming the
+    file that is not a readable Parquet file, or whose columns or kind, domain or task differ from the first's:
+    readers take the first file's schema and metadata for the whole directory, so a file copied in from another
+    recording would otherwise be read with it."""
+    files = sorted(path.glob("*.parquet"))
+    if not files:
+        raise FileNotFoundError(f"no Parquet files in {path}")
+    first = None
+    for f in files:
+        if not f.is_file():
+            raise DataFileError(f"{f}: not a file ({'a folder' if f.is_dir() else 'a broken link'}); a directory "
+                                f"of transitions holds one Parquet file per episode")
+        with _readable(f):
+            schema = pq.read_schema(f)
+        meta = read_schema_metadata(schema)
+        identity = {k: meta.get(k) for k in IDENTITY_KEYS}
+        columns = [(c.name, str(c.type)) for c in schema]
+        if first is None:
+            first = (f, identity, columns)
+            continue
+        if identity != first[1]:
+            raise DataFileError(f"{f} holds {_what(identity)}, but {first[0].name} beside it holds "
+                                f"{_what(first[1])}: one directory holds one recording (move the file out)")
+        if columns != first[2]:
+            theirs, ours = dict(columns), dict(first[2])
+            diff = ([f"missing {c}" for c in ours if c not in theirs] + [f"extra {c}" for c in theirs if c not in ours]
+                    + [f"{c} is {theirs[c]}, not {ours[c]}" for c in ours if c in theirs and theirs[c] != ours[c]])
+            raise DataFileError(f"{f}: its columns differ from {first[0].name}'s beside it ({'; '.join(diff[:3])}"
+                                f"{'; ...' if len(diff) > 3 else ''}): one directory holds one recording")
+    return files
+
+
+def _what(identity: dict) -> str:
+    return ", ".join(f"{k} {identity[k]!r}" for k in IDENTITY_KEYS)
 
 
 def read_schema_metadata(schema: pa.Schema) -> dict:
@@ -151,8 +188,8 @@ def _readable(path: str | Path) -> Iterator[None]:
         if e.errno is None:  # ours (`no Parquet files in <folder>`): its message says it
             raise MissingDataFile(str(e)) from None
         raise MissingDataFile(f"{path} is missing: run the stage that writes it (`dvc repro`)") from None
-    except (pa.ArrowException, OSError) as e:
-        raise DataFileError(f"{path}: not a readable Parquet file ({e})") from None
+    except (pa.ArrowException, OSError) as e:  # Arrow's messages may go on for lines (a whole schema): the first
+        raise DataFileError(f"{path}: not a readable Parquet file ({str(e).splitlines()[0]})") from None
 
 
 def _read_table(path: Path, columns: list[str] | None) -> pa.Table:
@@ -197,16 +234,32 @@ def read_transitions(path: str | Path, columns: list[str] | None = None, *, kind
         if missing:
             raise DataFileError(f"{path}: missing columns {missing}")
     if Path(path).is_dir():
-        files = sorted(Path(path).glob("*.parquet"))
-        if not files:
-            raise FileNotFoundError(f"no Parquet files in {path}")
-        df = pd.concat([_read_table(f, columns).to_pandas() for f in files], ignore_index=True)
+        with _readable(path):
+            files = _directory_files(Path(path))
+        tables = [_read_table(f, columns).to_pandas() for f in files]
+        _check_episodes_apart(files, tables)
+        df = pd.concat(tables, ignore_index=True)
     else:
         df = _read_table(Path(path), columns).to_pandas()
     if df.empty:
         raise DataFileError(f"{path}: holds no transitions (0 rows)")
     check_finite(df, path)
     return df
+
+
+def _check_episodes_apart(files: list[Path], tables: list[pd.DataFrame]) -> None:
+    """A DataFileError naming two files of a directory that hold the same episode index: read together, their rows
+    would count as one episode (a recording's files copied or renamed into another one)."""
+    if "episode_index" not in tables[0].columns:
+        return
+    owner: dict[int, Path] = {}
+    for f, t in zip(files, tables):
+        for e in np.unique(t["episode_index"].to_numpy()):
+            if int(e) in owner:
+                raise DataFileError(f"{f} and {owner[int(e)].name} beside it both hold episode {int(e)}: each episode "
+                                    f"of a directory is in one file (a file copied or renamed from another "
+                                    f"recording? record into the folder itself, numbering goes on)")
+            owner[int(e)] = f
 
 
 MEASURED_PREFIXES = (layout.STATE_PREFIX, layout.NEXT_STATE_PREFIX, layout.ACTION_PREFIX, layout.HUMAN_ACTION_PREFIX)

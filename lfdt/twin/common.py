@@ -47,13 +47,16 @@ def recordings(task: str, seed: int, root: str | Path) -> dict[str, Path]:
 
 
 def check_real_recording(p: TwinParams, task: str, name: str) -> Path:
-    """The folder of recording ``name`` of ``task`` made on the robots (backend 'real'); a StageError naming
-    ``twin.real_dir``'s folder and the command that records it when it holds no episode."""
+    """The folder of recording ``name`` of ``task`` made on the robots (backend 'real'), checked where the user put
+    it: a StageError naming ``twin.real_dir``'s folder and the command that records it when it holds no episode, a
+    DataFileError naming the episode file that is not this recording's (:func:`lfdt.data.check_transitions`)."""
     src = Path(p.real_dir) / task / name
     if not any(src.glob("episode_*.parquet")):
         command = "record-random" if name.startswith("random") else "record-demos"
         raise StageError(f"params.yaml twin.backend is 'real', but {src} holds no recording (episode_*.parquet; "
                          f"twin.real_dir = {p.real_dir!r}); record it with `python -m lfdt.robot {command}`")
+    kind, domain = name.split("_")
+    data.check_transitions(src, kind, domain, registry.get(task).layout)
     return src
 
 
