@@ -164,6 +164,9 @@ def _has_space(folder: Path, path: Path, what: str, expected: str, error: type[I
         st = os.statvfs(folder)
     except OSError:
         return  # a file system that cannot tell: the write itself will say
+    if st.f_blocks == 0:  # procfs, sysfs: no disk behind them, so "0 bytes free" would say the wrong thing
+        raise _fail(error, what, path, "is on a virtual file system (such as /proc or /sys), which keeps no files",
+                    expected)
     free = st.f_bavail * st.f_frsize
     if free < MIN_FREE_BYTES:
         raise _fail(error, what, path, f"the disk holding it is full ({free} bytes free)", expected)

@@ -218,6 +218,8 @@ CASES = [
     Case("log-a-folder", lambda tmp: (tmp / "logs").mkdir() or deploy(log_path="logs")(tmp),
          ("--log {tmp}/logs: is a folder, not a file",)),
     Case("log-dev-full", deploy(log_path="/dev/full"), ("--log /dev/full: is a character device",)),
+    # /proc/self/comm: a regular file its process may write, as root or not (it is the process's name)
+    Case("log-in-proc", deploy(log_path="/proc/self/comm"), ("--log /proc/self/comm: is on a virtual file system",)),
     Case("log-under-a-file", lambda tmp: (tmp / "f").write_text("x") and deploy(log_path="f/deploy.csv")(tmp),
          ("--log {tmp}/f/deploy.csv: a folder on its path is a file",)),
     Case("log-disk-full", deploy(log=LOG.encode()), ("--log {tmp}/deploy_lfdt.csv: the disk holding it is full",),
