@@ -6,6 +6,7 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 from lfdt import methods, parallel, stage
 from lfdt.box_push_jobs import common
 from lfdt.box_push_jobs.evaluate import check_policies, evaluate_job
+from lfdt.rendering import check_videos
 
 
 def run() -> None:
@@ -13,6 +14,7 @@ def run() -> None:
         "policies": "the BC policies, a folder per configuration",
         "videos": "where the videos go, a folder per (method, demos)",
         "reports": "where the report <method>-d<demos>.json and its trials go"})
+    check_videos(p.evaluation.videos, "evaluation.videos")
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, policies_dir=args.policies,
                           videos_dir=args.videos)
     group = cfgs[0].group

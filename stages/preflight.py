@@ -12,6 +12,7 @@ from lfdt import mlflow_runs, parallel, stage
 from lfdt.config import Params
 from lfdt.files import write_atomic
 from lfdt.reach import redact
+from lfdt.rendering import check_videos
 from lfdt.tasks import registry
 from lfdt.tasks.box_push.env import check_start_reachable
 from lfdt.twin.common import check_real_recordings
@@ -24,13 +25,18 @@ def check_runnable(p: Params) -> None:
     """What a stage would refuse in params that lfdt.config accepts (every value valid, every key present): the
     torch device missing on this machine (the training stages' own check, :func:`lfdt.nets.torch_device`), a box
     start an arm cannot reach (the environment's, at whichever reset drew it), a twin task name the registry does not
-    know (the twin stages' own check) and, with twin.backend 'real', a recording of the robots that is not there
-    (twin_collect's). So this stage lists every task's code among its deps (tests/test_dvc_deps.py) and reruns, in
-    seconds, when one changes; its output stays the same bytes, so no stage below reruns for it."""
+    know (the twin stages' own check), with twin.backend 'real', a recording of the robots that is not there or not
+    one recording (twin_collect's) and, when videos are asked for, a MUJOCO_GL with which MuJoCo cannot render
+    (evaluate's and twin_evaluate's, at their first frame). So this stage lists every task's code among its deps
+    (tests/test_dvc_deps.py) and reruns, in seconds, when one changes; its output stays the same bytes, so no stage
+    below reruns for it."""
     check_start_reachable(p.env)
     registry.check_twin_names(p.twin)
     if p.twin.backend == "real":  # the robots' recordings are the twin's first input
         check_real_recordings(p.twin)
+    check_videos(p.evaluation.videos, "evaluation.videos")
+    if p.twin.backend == "sim":
+        check_videos(p.twin.videos, "twin.videos")
     if p.device != "cpu":  # torch loads in seconds: only when there is a device to look for
         from lfdt.nets import torch_device
 

@@ -5,6 +5,7 @@ import lfdt.numerics  # noqa: F401  (first: pins the numeric code paths before n
 
 from lfdt import methods, parallel, stage
 from lfdt.box_push_jobs import common
+from lfdt.rendering import check_videos
 
 BC_JOB = parallel.Job("lfdt.box_push_jobs.bc", "bc_job")
 """By name: this process never imports torch; each job checks params.yaml's device before it loads anything."""
@@ -16,6 +17,7 @@ def run() -> None:
         "dynamics-dir": "F and F^-1 (bc.recovery_copies relabels with F^-1)",
         "policies": "where the policies go, a folder per configuration",
         "reports": "where the report <method>-d<demos>.json and its learning curve go"})
+    check_videos(p.evaluation.videos, "evaluation.videos")  # evaluate.py renders them next, in the same DVC stage
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, bc_data_dir=args.bc_data,
                           policies_dir=args.policies, dynamics_dir=args.dynamics_dir)
     group = cfgs[0].group

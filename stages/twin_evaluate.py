@@ -6,6 +6,7 @@ from pathlib import Path
 
 from lfdt import parallel, stage, twin
 from lfdt.errors import InputError
+from lfdt.rendering import check_videos
 from lfdt.rig import deploy_log
 from lfdt.tasks import registry
 from lfdt.twin.common import SeedJob
@@ -34,6 +35,8 @@ def run() -> None:
         "models": "the models, a folder per task", "videos": "where the videos go, a folder per task",
         "reports": "where the report <task>_eval.json goes"})
     task, p = args.task, all_params.twin
+    if p.backend == "sim":
+        check_videos(p.videos, "twin.videos")
     video_root = args.videos / task
     video_root.mkdir(parents=True, exist_ok=True)  # a DVC output, also with no videos or the real robots' logs
     with stage.frame(args.reports / f"{task}_eval.json", "twin_evaluate",

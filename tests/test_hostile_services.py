@@ -328,6 +328,15 @@ CASES = [
      ["LFDT_NUMERICS='fast': expected one of pinned, native"]),
     ("numerics-fast-sweep", script, {"LFDT_NUMERICS": "fast"}, ["-m", "lfdt.sweep", "--list"],
      ["LFDT_NUMERICS='fast': expected one of pinned, native"]),
+    # MUJOCO_GL exported for MuJoCo's viewer on a machine without a display, or mistyped: before, a traceback at the
+    # first video, after every training stage (in bc_evaluate, after its BC training)
+    ("mujoco-gl-glfw-preflight", script, {"MUJOCO_GL": "glfw", "DISPLAY": "", "WAYLAND_DISPLAY": ""},
+     [str(ROOT / "stages/preflight.py"), "--params", str(ROOT / "params.yaml"), "--out", "{tmp}/preflight.txt"],
+     ["MUJOCO_GL='glfw': MuJoCo cannot render here", "evaluation.videos = 2", "MUJOCO_GL=egl"]),
+    ("mujoco-gl-typo-train-bc", script, {"MUJOCO_GL": "elg"},
+     [str(ROOT / "stages/train_bc.py"), "--params", str(ROOT / "params.yaml"), "--method", "lfdt", "--demos", "50",
+      "--bc-data", "{tmp}/bc", "--dynamics-dir", "{tmp}/dyn", "--policies", "{tmp}/pol", "--reports", "{tmp}/rep"],
+     ["MUJOCO_GL='elg': MuJoCo cannot render here", "invalid value", "evaluation.videos = 2"]),
     ("predict-nan", predict_nan, {}, [], ["-i obs.json", "row 0, column 'y' is nan", "finite"]),
     ("predict-text", predict_text, {}, [], ["-i obs.json", "row 0, column 'y'", "'fast' is not a number"]),
     ("predict-malformed-json", predict_malformed_json, {}, [], ["-i obs.json", "Invalid input", "JSON"]),
