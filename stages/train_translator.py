@@ -15,10 +15,12 @@ def run() -> None:
         "demos-dir": "the demonstrations, <pairing>.parquet", "random-dir": "the random motion, <domain>.parquet",
         "dynamics-dir": "F and F^-1", "translators": "where the translators go, a folder per configuration",
         "bc-data": "where the translated demonstrations go, a folder per configuration",
-        "reports": "where the report <method>-d<demos>.json and its learning curve go"})
+        "reports": "where the report <method>-d<demos>.json and its learning curve go",
+        "checkpoints": "resumable training state (a killed stage goes on from it), a folder per configuration"})
     cfgs = common.configs(args.method, args.demos, p.grid.seeds, p, demos_dir=args.demos_dir,
                           random_dir=args.random_dir, dynamics_dir=args.dynamics_dir,
-                          translators_dir=args.translators, bc_data_dir=args.bc_data)
+                          translators_dir=args.translators, bc_data_dir=args.bc_data,
+                          checkpoints_dir=args.checkpoints)
     group = cfgs[0].group
     tcfg = methods.translator_config(args.method, p.translator)
     with stage.frame(args.reports / f"{group}.json") as f:

@@ -50,6 +50,13 @@ def test_every_stage_ran(project):
         assert f"'{name}'" in out
 
 
+def test_no_training_checkpoint_outlives_its_stage(project):
+    """The resumable states of experts and translators are removed once their stage's models are saved."""
+    root, _ = project
+    left = [str(f.relative_to(root)) for f in (root / "checkpoints").rglob("*") if f.is_file()]
+    assert not left, left
+
+
 def test_artifact_schemas(project):
     dst, _ = project
     for domain in layout.DOMAINS:

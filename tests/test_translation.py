@@ -323,6 +323,73 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
     assert not torch.equal(stacked[0].G.layers[0].weight, stacked[1].G.layers[0].weight)
 
 
+class _Killed(Exception):
+    """Stands for the stage being killed mid-training."""
+
+
+def test_a_killed_training_resumes_from_its_checkpoint_to_the_same_bits(tiny, tmp_path, capsys):
+    """Translator training stopped after a checkpoint and run again goes on from the checkpoint (not iteration 1),
+    and ends with the same G, D, kept G, curves and selection as a run never stopped: optimiser moments, random
+    draws, past fakes, partial averages and the decaying learning rate all come back. A checkpoint of another run
+    (another seed) is not used, a damaged one is ignored, and a finished run found again trains no iteration."""
+    env, paths, dyn = tiny
+    kin = box_push_kinematics(env)
+    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
+    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_columns.state_columns("Y")]]
+    y = y.to_numpy(np.float32).copy()
+    # log_every 3 and select_every 10: checkpoints fall between two logs (partial averages are saved)
+    cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=3, select_every=10, batch_size=16,
+                           history_size=8, lr_decay="cosine")
+    members = []
+    for seed in (4, 7):
+        eps = {p: np.unique(t.episode) for p, t in random_x.items()}
+        pick = {p: t.subset(np.isin(t.episode, np.random.default_rng(seed).choice(eps[p], 6, replace=False)))
+                for p, t in random_x.items()}
+        train, held = split_held_out(pick, 0.3, seed)
+        members.append(Member(train, seed, held))
+
+    def run(ckpt=None, logs=None):
+        return train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin, checkpoint_dir=ckpt,
+                                 logs=logs)
+
+    whole, whole_stats = run()
+
+    def kill_at(it_stop):
+        def log(point, it):
+            if it >= it_stop:
+                raise _Killed
+        return log
+
+    with pytest.raises(_Killed):
+        run(tmp_path, [kill_at(24), None])
+    assert (tmp_path / "checkpoint.pt").exists()
+    seen = []
+    resumed, resumed_stats = run(tmp_path, [lambda point, it: seen.append(it), None])
+    assert "resuming from" in (out := capsys.readouterr().out) and "at iteration 20 of 40" in out, out
+    assert seen[:len(whole_stats[0]["curve"])] == [c["iteration"] for c in whole_stats[0]["curve"]], \
+        "the new run's log did not get the curve up to the checkpoint, then the rest"
+    for k in range(len(members)):
+        a, b = whole[k].state_dict(), resumed[k].state_dict()
+        assert all(torch.equal(a[key], b[key]) for key in a), f"member {k}: not the same bits after resuming"
+        assert whole_stats[k]["curve"] == resumed_stats[k]["curve"]
+        assert whole_stats[k]["selected_iteration"] == resumed_stats[k]["selected_iteration"]
+    # found again when finished (a failure after training): no iteration trains, the same translators
+    again, _ = run(tmp_path)
+    assert "at iteration 40 of 40" in capsys.readouterr().out
+    assert all(torch.equal(again[0].state_dict()[key], v) for key, v in whole[0].state_dict().items())
+    # another run's checkpoint (other seeds) is not resumed: it trains from iteration 1 and overwrites it
+    other = [Member(members[0].demos, 99, members[0].held_out)]
+    with pytest.raises(_Killed):
+        train_translators(other, random_x, y, dyn, cfg, tl=TL, kinematics=kin, checkpoint_dir=tmp_path,
+                          logs=[kill_at(4)])
+    assert "resuming" not in capsys.readouterr().out
+    # a damaged checkpoint: one line saying so, then a run from iteration 1 (still the same bits)
+    (tmp_path / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    fresh, _ = run(tmp_path)
+    assert "not a readable checkpoint" in capsys.readouterr().err
+    assert all(torch.equal(fresh[0].state_dict()[key], v) for key, v in whole[0].state_dict().items())
+
+
 def test_learning_rate_decays_as_asked():
     assert lr_factor("none", 500, 1000) == 1.0
     assert lr_factor("cosine", 1, 1000) == 1.0 and lr_factor("linear", 1, 1000) == 1.0

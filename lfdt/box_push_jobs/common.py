@@ -52,6 +52,8 @@ class Config:
     """The BC policies, one folder per configuration."""
     videos_dir: Path | None = None
     """The evaluation videos, one folder per configuration."""
+    checkpoints_dir: Path | None = None
+    """Resumable translator training, one folder per group of seeds (removed once its translators are saved)."""
 
     @property
     def group(self) -> str:

@@ -4,6 +4,7 @@ seed's demonstrations, measure them."""
 from __future__ import annotations
 
 import contextlib
+import shutil
 import time
 from pathlib import Path
 
@@ -56,15 +57,19 @@ def translator_job(cfgs: list[Config], progress: Progress | None = None) -> list
             for r in range(tcfg.restarts):
                 members.append(Member(demos, restart_seed(cfg.seed, r), held))
                 logs.append(restart_log(run.metrics, r))
+        ckpt_dir = None if first.checkpoints_dir is None else (
+            Path(first.checkpoints_dir) / first.group / ("s" + "-".join(str(c.seed) for c in cfgs)))
         trained, trained_stats = train_translators(
             members, random_x, y_random, dyn, tcfg, p.dynamics.std_floor, logs, progress, tl=LAYOUT, kinematics=kin,
-            device=device)
+            device=device, checkpoint_dir=ckpt_dir)
         results = []
         for i, (cfg, run, (episodes, demos_all, _, held)) in enumerate(zip(cfgs, runs, per_seed)):
             trs = trained[i * tcfg.restarts:(i + 1) * tcfg.restarts]
             all_stats = trained_stats[i * tcfg.restarts:(i + 1) * tcfg.restarts]
             results.append(_finish(cfg, run, trs, all_stats, episodes, demos_all, held, random_x, y_random, dyn,
                                    tcfg, demo_paths, kin, p.env, t0))
+    if ckpt_dir is not None:
+        shutil.rmtree(ckpt_dir, ignore_errors=True)  # every translator of the group is saved
     return results
 
 

@@ -7,6 +7,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -17,6 +18,7 @@ from lfdt.dynamics import DynamicsModels
 from lfdt.layout import TaskLayout
 from lfdt.nets import check_finite, softplus
 from lfdt.optim import Adam
+from lfdt.translation.checkpoint import Checkpoint, run_key
 from lfdt.translation.kinematics import Kinematics
 from lfdt.translation.losses import Losses, normalised
 from lfdt.translation.model import Translator, fit_x_normalizers
@@ -92,8 +94,8 @@ class Member:
 def train_translators(members: list[Member], random_x: dict[str, Transitions], y_random: np.ndarray,
                       dyn: DynamicsModels, cfg: TranslatorConfig, std_floor: float = 1e-2,
                       logs: list[Callable[[dict, int], None] | None] | None = None, progress=None,
-                      *, tl: TaskLayout, kinematics: Kinematics | None = None, device: str | torch.device = "cpu"
-                      ) -> tuple[list[Translator], list[dict]]:
+                      *, tl: TaskLayout, kinematics: Kinematics | None = None, device: str | torch.device = "cpu",
+                      checkpoint_dir: str | Path | None = None) -> tuple[list[Translator], list[dict]]:
     """Train the translators of several members of one configuration (seeds, restarts) as one stacked model: G and D
     with eq. 6 (frozen F, F^-1) on ``device``. Each member has its own initialisation, demonstrations, minibatches
     and checkpoint; its result is the same bits whether it trains alone or in any stack (a test checks). Returns one
@@ -102,6 +104,10 @@ def train_translators(members: list[Member], random_x: dict[str, Transitions], y
     Every ``cfg.select_every`` iterations a member's translation loss on its held-out demonstrations is measured and
     it keeps its G of the lowest value (without them, the last iterate). ``kinematics`` is required with
     ``cfg.kinematics == 'forward'`` (the arms whose end columns G does not output).
+
+    With ``checkpoint_dir`` the whole training state is saved there every ``cfg.select_every`` iterations, and a
+    checkpoint of the same run found there (:mod:`lfdt.translation.checkpoint`) is resumed: the same bits as a run
+    never stopped. The caller removes it once the translators are saved.
     """
     if not members:
         raise ValueError("train_translators needs at least one member")
@@ -116,11 +122,16 @@ def train_translators(members: list[Member], random_x: dict[str, Transitions], y
     tr.y_mean.copy_(dyn.y_norm.mean)
     tr.y_std.copy_(dyn.y_norm.std)
     fit_x_normalizers(tr, dyn, random_x, std_floor, cfg.object, cfg.hand_skip, tl=tl)
+    checkpoint = None
+    if checkpoint_dir is not None:
+        checkpoint = Checkpoint(checkpoint_dir, run_key(cfg, [m.seed for m in members], [m.demos for m in members],
+                                                        [m.held_out for m in members], random_x, y_random, dyn,
+                                                        str(device)))
     try:
         tr.to(device)
         dyn.to(device)
         return _train_stack(tr, dyn, members, random_x, y_random, cfg, gens, logs or [None] * len(members),
-                            progress, tl, device)
+                            progress, tl, device, checkpoint)
     finally:
         dyn.cpu()
 
@@ -160,7 +171,8 @@ def lr_factor(kind: str, it: int, iterations: int) -> float:
 def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], random_x: dict[str, Transitions],
                  y_random: np.ndarray, cfg: TranslatorConfig, gens: list[torch.Generator],
                  logs: list[Callable[[dict, int], None] | None], progress, tl: TaskLayout,
-                 device: str | torch.device) -> tuple[list[Translator], list[dict]]:
+                 device: str | torch.device, checkpoint: Checkpoint | None = None
+                 ) -> tuple[list[Translator], list[dict]]:
     """The training loop of :func:`train_translators`, with ``tr`` and ``dyn`` on ``device``."""
     n = len(members)
     cache: dict = {}
@@ -182,8 +194,29 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
     # the sideways term joins the curve only where it is on (translators without it keep their curves of before)
     curve_keys = ("loss/D", "loss/adv", "loss/dyn", "loss/id", "loss/hand", "loss/G_total", "D/accuracy",
                   *(("loss/side",) if cfg.lambda_side else ()))
+    start, wall_before = 1, 0.0
+    saved = checkpoint.load() if checkpoint is not None else None
+    if saved is not None:
+        tr.load_state_dict(saved["model"])
+        opt_g.load_state_dict(saved["opt_g"])
+        opt_d.load_state_dict(saved["opt_d"])
+        for g, st in zip(gens, saved["generators"]):
+            g.set_state(st)
+        pools = [t.to(device) for t in saved["pools"]]
+        best = [(loss_, state or None, it_) for loss_, state, it_ in
+                zip(saved["best_loss"], saved["best_state"], saved["best_iteration"])]
+        sums, curves = saved["sums"], saved["curves"]
+        start, wall_before = saved["iteration"] + 1, saved["wall_s"]
+        for k in range(n):  # the new MLflow runs get the curves up to the checkpoint too
+            if logs[k]:
+                for point in curves[k]:
+                    logs[k]({key: v for key, v in point.items() if key != "iteration"}, point["iteration"])
+        if progress is not None:
+            progress.update(n * saved["iteration"])
+        print(f"translator: resuming from {checkpoint.path} at iteration {saved['iteration']} of {cfg.iterations}",
+              flush=True)
     t0 = time.perf_counter()
-    for it in range(1, cfg.iterations + 1):
+    for it in range(start, cfg.iterations + 1):
         if cfg.lr_decay != "none":
             for opt, scale in ((opt_g, 1.0), (opt_d, cfg.d_lr_scale)):
                 for group in opt.param_groups:
@@ -267,7 +300,14 @@ def _train_stack(tr: Translator, dyn: DynamicsModels, members: list[Member], ran
                 curves[k].append({"iteration": it, **point})
                 if logs[k]:
                     logs[k](point, it)
-    wall = time.perf_counter() - t0
+        if checkpoint is not None and select_now:  # the last too: a failure after training loses none of it
+            checkpoint.save({
+                "iteration": it, "model": tr.state_dict(), "opt_g": opt_g.state_dict(), "opt_d": opt_d.state_dict(),
+                "generators": [g.get_state() for g in gens], "pools": [t.cpu() for t in pools],
+                "best_loss": [b[0] for b in best], "best_state": [b[1] or {} for b in best],
+                "best_iteration": [b[2] for b in best], "sums": sums, "curves": curves,
+                "wall_s": wall_before + time.perf_counter() - t0})
+    wall = wall_before + time.perf_counter() - t0
     out_trs, out_stats = [], []
     for k in range(n):
         one = tr.member(k)
