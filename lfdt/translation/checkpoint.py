@@ -36,8 +36,9 @@ def _arrays_of(t: Transitions | None) -> list[np.ndarray]:
 
 def run_key(cfg: TranslatorConfig, seeds: list[int], demos: list[dict[str, Transitions]],
             held_out: list[dict[str, Transitions] | None], random_x: dict[str, Transitions], y_random: np.ndarray,
-            dyn: torch.nn.Module, device: str) -> str:
-    """A hash of everything a stack's training depends on: a checkpoint resumes only the run it was written by."""
+            modules: list[torch.nn.Module], device: str) -> str:
+    """A hash of everything a stack's training depends on: a checkpoint resumes only the run it was written by.
+    ``modules``: the untrained translator (its initial weights, its normalisers, its arms' kinematics) and F, F^-1."""
     h = hashlib.sha256(json.dumps({"cfg": cfg.model_dump(), "seeds": seeds, "device": str(device)},
                                   sort_keys=True).encode())
     sets = [*demos, *(ho or {} for ho in held_out), random_x]
@@ -47,9 +48,10 @@ def run_key(cfg: TranslatorConfig, seeds: list[int], demos: list[dict[str, Trans
             for a in _arrays_of(s[pairing]):
                 h.update(np.ascontiguousarray(a).tobytes())
     h.update(np.ascontiguousarray(y_random).tobytes())
-    for name, t in dyn.state_dict().items():
-        h.update(name.encode())
-        h.update(t.detach().cpu().contiguous().numpy().tobytes())
+    for module in modules:
+        for name, t in module.state_dict().items():
+            h.update(name.encode())
+            h.update(t.detach().cpu().contiguous().numpy().tobytes())
     return h.hexdigest()[:32]
 
 
@@ -77,7 +79,3 @@ class Checkpoint:
         """Write ``state`` (with this run's key) atomically."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(self.path, lambda tmp: torch.save({**state, "key": self.key}, tmp))
-
-    def clear(self) -> None:
-        """Remove the checkpoint (after the translators are saved)."""
-        self.path.unlink(missing_ok=True)

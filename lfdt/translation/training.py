@@ -125,8 +125,8 @@ def train_translators(members: list[Member], random_x: dict[str, Transitions], y
     checkpoint = None
     if checkpoint_dir is not None:
         checkpoint = Checkpoint(checkpoint_dir, run_key(cfg, [m.seed for m in members], [m.demos for m in members],
-                                                        [m.held_out for m in members], random_x, y_random, dyn,
-                                                        str(device)))
+                                                        [m.held_out for m in members], random_x, y_random,
+                                                        [tr, dyn], str(device)))
     try:
         tr.to(device)
         dyn.to(device)
