@@ -21,6 +21,7 @@ import importlib
 import multiprocessing as mp
 import os
 import queue
+import signal
 import sys
 import threading
 import time
@@ -85,6 +86,7 @@ def _init_worker(parent: int, q) -> None:
     rerun of the same stage."""
     global _PROGRESS_QUEUE
     _PROGRESS_QUEUE = q
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # the server's quiet exit (lfdt.forkserver_signals) ends
     lifeline.watch(parent)
 
 
@@ -162,9 +164,10 @@ def run_jobs(fn: Callable[[Any, Progress], Any], jobs: Sequence[Any], workers: i
                 from lfdt.mlflow_runs import worker_modules
 
                 preload = worker_modules()
-            # lfdt.numerics first: its pins must precede numpy's and torch's import in the server as everywhere
+            # lfdt.forkserver_signals first (a Ctrl-C while the server imports is silent), then lfdt.numerics: its pins
+            # must precede numpy's and torch's import in the server as everywhere
             module = fn.module if isinstance(fn, Job) else fn.__module__
-            ctx.set_forkserver_preload(["lfdt.numerics", module, *preload])
+            ctx.set_forkserver_preload(["lfdt.forkserver_signals", "lfdt.numerics", module, *preload])
         q = ctx.Queue()
         done = threading.Event()
 

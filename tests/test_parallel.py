@@ -139,6 +139,50 @@ def test_the_forkserver_imports_the_jobs_module_and_mlflow_once_for_its_workers(
     assert mlflow_runs.worker_modules("postgresql+psycopg2://u@h/db")[1] == "mlflow.store.tracking.sqlalchemy_store"
 
 
+CTRL_C = """
+import sys
+sys.path.insert(0, {tests!r})
+from lfdt import parallel, stage
+import test_parallel
+stage.main(lambda: parallel.run_jobs(test_parallel.square, [1, 2], workers=2, preload=["slow_preload"]))
+"""
+
+
+def test_ctrl_c_while_the_forkserver_imports_is_the_stages_one_line(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while the workers' server is still
+    importing its modules: the stage's one line and exit 130, no traceback from the server (Python 3.11's server
+    imports before it ignores SIGINT), and no process of the stage left behind."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MLFLOW_TRACKING_URI", parallel.START_METHOD_VAR)}
+    env["PYTHONPATH"] = str(ROOT / "tests")
+    stage = subprocess.Popen([sys.executable, "-c", CTRL_C.format(tests=str(ROOT / "tests"))], cwd=tmp_path,
+                             env=env, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        time.sleep(2)  # the server sleeps 4 s in slow_preload's import
+        assert stage.poll() is None, stage.stderr.read()
+        os.killpg(stage.pid, signal.SIGINT)
+        _, err = stage.communicate(timeout=30)
+        lines = [line for line in err.replace("\r", "\n").splitlines() if line.strip() and "it/s" not in line
+                 and "s/it" not in line and not line.startswith("jobs:")]
+        assert stage.returncode == 130, err[-3000:]
+        assert lines == ["error: interrupted (Ctrl-C): the stage's outputs are incomplete; `dvc repro` reruns it"], \
+            err[-3000:]
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                os.killpg(stage.pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.2)
+        else:
+            raise AssertionError("a process of the stage (its forkserver?) outlived the Ctrl-C")
+    finally:
+        try:
+            os.killpg(stage.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 LIGHT_STAGES = ("train_translator", "track_demos", "train_bc", "twin_collect", "twin_train", "twin_evaluate")
 """Stages that name their job (parallel.Job) and need nothing else heavy: their own process imports no torch,
 MuJoCo or MLflow store before its workers start (about 2.5 s of a small stage's start on a 2-core EPYC)."""
