@@ -65,7 +65,7 @@ def test_a_cuda_index_beyond_the_machine_is_a_clear_error(monkeypatch):
      "reports/dynamics.json", "--curve", "reports/dynamics_curve.csv"],
     ["stages/train_translator.py", "--method", "lfdt", "--demos", "50", "--demos-dir", "data/demos", "--random-dir",
      "data/random", "--dynamics-dir", "models/dynamics", "--translators", "models/translator", "--bc-data",
-     "data/bc_train", "--reports", "reports/translator"],
+     "data/bc_train", "--reports", "reports/translator", "--checkpoints", "checkpoints/translator"],
     ["stages/train_bc.py", "--method", "lfdt", "--demos", "50", "--bc-data", "data/bc_train", "--dynamics-dir",
      "models/dynamics", "--policies", "models/bc", "--reports", "reports/bc"],
     ["stages/twin_train.py", "--task", "block_push", "--data-dir", "data/twin", "--models", "models/twin",
