@@ -86,7 +86,8 @@ def _init_worker(parent: int, q) -> None:
     rerun of the same stage."""
     global _PROGRESS_QUEUE
     _PROGRESS_QUEUE = q
-    signal.signal(signal.SIGINT, signal.default_int_handler)  # the server's quiet exit (lfdt.forkserver_signals) ends
+    # Ctrl-C raises KeyboardInterrupt in the job again: the server handed on its quiet exit (lfdt.forkserver_signals)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     lifeline.watch(parent)
 
 
