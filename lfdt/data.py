@@ -107,10 +107,18 @@ def write_table(table: pa.Table, path: str | Path) -> Path:
 
 
 def _first_file(path: str | Path) -> Path:
-    """A Parquet file itself, or the first file of a directory of Parquet files (a recording), every file of which
-    is checked to hold the same columns and the same kind, domain and task as the first (:func:`_directory_files`)."""
+    """A Parquet file itself, or the first file of a directory of Parquet files (a recording); the others are
+    checked against it where the directory is read (:func:`read_transitions`, :func:`_directory_files`)."""
     path = Path(path)
-    return _directory_files(path)[0] if path.is_dir() else path
+    return _parquet_files(path)[0] if path.is_dir() else path
+
+
+def _parquet_files(path: Path) -> list[Path]:
+    """The Parquet files of a directory, in order (a FileNotFoundError when it holds none)."""
+    files = sorted(path.glob("*.parquet"))
+    if not files:
+        raise FileNotFoundError(f"no Parquet files in {path}")
+    return files
 
 
 IDENTITY_KEYS = ("kind", "domain", "task")
@@ -122,9 +130,7 @@ def _directory_files(path: Path) -> list[Path]:
     file that is not a readable Parquet file, or whose columns or kind, domain or task differ from the first's:
     readers take the first file's schema and metadata for the whole directory, so a file copied in from another
     recording would otherwise be read with it."""
-    files = sorted(path.glob("*.parquet"))
-    if not files:
-        raise FileNotFoundError(f"no Parquet files in {path}")
+    files = _parquet_files(path)
     first = None
     for f in files:
         if not f.is_file():
