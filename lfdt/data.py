@@ -25,7 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from lfdt import layout
-from lfdt.errors import StageError
+from lfdt.errors import StageError, first_line
 from lfdt.files import write_atomic
 
 META_KEY = b"lfdt"
@@ -194,8 +194,8 @@ def _readable(path: str | Path) -> Iterator[None]:
         if e.errno is None:  # ours (`no Parquet files in <folder>`): its message says it
             raise MissingDataFile(str(e)) from None
         raise MissingDataFile(f"{path} is missing: run the stage that writes it (`dvc repro`)") from None
-    except (pa.ArrowException, OSError) as e:  # Arrow's messages may go on for lines (a whole schema): the first
-        raise DataFileError(f"{path}: not a readable Parquet file ({str(e).splitlines()[0]})") from None
+    except (pa.ArrowException, OSError) as e:  # Arrow's messages may go on for lines (a whole schema)
+        raise DataFileError(f"{path}: not a readable Parquet file ({first_line(e)})") from None
 
 
 def _read_table(path: Path, columns: list[str] | None) -> pa.Table:

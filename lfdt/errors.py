@@ -5,6 +5,13 @@ INTERRUPTED = 130
 """Exit code of a command stopped by Ctrl-C (128 + SIGINT), as a shell reports it."""
 
 
+def first_line(err: BaseException) -> str:
+    """The first line of an exception's message (a library's may go on for lines), or its type's name when the
+    message is empty: what a one-line error quotes of a cause."""
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
+
+
 class StageError(Exception):
     """Base of the errors whose message says all a user needs."""
 

@@ -113,8 +113,7 @@ def json_object(path: str | Path, what: str, expected: str, parse: Callable[[dic
     except KeyError as err:
         raise _fail(error, what, path, f"has no key {err.args[0]!r}", expected) from None
     except (TypeError, ValueError, IndexError) as err:
-        raise _fail(error, what, path, str(err).splitlines()[0] if str(err) else type(err).__name__,
-                    expected) from None
+        raise _fail(error, what, path, errors.first_line(err), expected) from None
 
 
 class _Twice(Exception):

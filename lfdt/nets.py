@@ -13,7 +13,7 @@ import torch.nn.functional as nnf
 from torch import nn
 
 from lfdt import numerics
-from lfdt.errors import DeviceError, StageError
+from lfdt.errors import DeviceError, StageError, first_line
 
 
 def matmul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -264,11 +264,6 @@ class ModelFileError(StageError):
     """A saved model that cannot be loaded: names the file and what is wrong with it."""
 
 
-def _first_line(err: BaseException) -> str:
-    text = str(err).strip()
-    return text.splitlines()[0] if text else type(err).__name__
-
-
 def load_state(module: nn.Module, path: str | Path) -> nn.Module:
     """Load a state dict saved by :func:`save_state` (``weights_only=True``) into module; eval mode. A file that is
     missing, truncated, not a state dict or one of another model raises :class:`ModelFileError` naming it."""
@@ -279,14 +274,14 @@ def load_state(module: nn.Module, path: str | Path) -> nn.Module:
         raise ModelFileError(f"{path} is missing") from None
     except Exception as err:  # noqa: BLE001 - torch raises many kinds for a damaged file; each is this one error
         raise ModelFileError(f"{path} is not a saved state dict (truncated or another kind of file: "
-                             f"{type(err).__name__}: {_first_line(err)})") from None
+                             f"{type(err).__name__}: {first_line(err)})") from None
     if not isinstance(state, dict):
         raise ModelFileError(f"{path} holds a {type(state).__name__}, not a state dict")
     try:
         module.load_state_dict(state)
     except RuntimeError as err:
         raise ModelFileError(f"{path} holds the weights of another model than a {type(module).__name__} "
-                             f"({_first_line(err)})") from None
+                             f"({first_line(err)})") from None
     return module.eval()
 
 

@@ -29,7 +29,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lfdt.errors import InputError, StageError
+from lfdt.errors import InputError, StageError, first_line
 from lfdt.inputs import ArgumentParser, one_line_errors
 
 
@@ -80,7 +80,7 @@ def _locked_stages(root: Path) -> dict[str, dict]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-        raise InputError(f"{lock}: not YAML ({str(e).splitlines()[0]})") from None
+        raise InputError(f"{lock}: not YAML ({first_line(e)})") from None
     if not isinstance(data, dict) or not isinstance(data.get("stages"), dict):
         raise InputError(f"{lock}: expected a `stages:` mapping, as `dvc repro` writes it")
     bad = [name for name, entry in data["stages"].items() if not isinstance(entry, dict)]

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from lfdt.config import TranslatorConfig
+from lfdt.errors import first_line
 from lfdt.files import write_atomic
 from lfdt.translation.transitions import Transitions
 
@@ -70,7 +71,7 @@ class Checkpoint:
             state = torch.load(self.path, weights_only=True, map_location="cpu")
         except (OSError, RuntimeError, EOFError, ValueError, pickle.UnpicklingError) as e:
             # damaged (written outside write_atomic, or by another torch): it only saves time, so start over
-            print(f"{self.path}: not a readable checkpoint ({str(e).splitlines()[0] if str(e) else type(e).__name__}); "
+            print(f"{self.path}: not a readable checkpoint ({first_line(e)}); "
                   f"training starts from iteration 1", file=sys.stderr)
             return None
         return state if isinstance(state, dict) and state.get("key") == self.key else None
