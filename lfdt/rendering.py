@@ -32,8 +32,7 @@ def check_rendering(needed_by: str) -> None:
     ``needed_by`` says what would render (a params key and its value), so that the line says how to go on."""
     backend = os.environ.get("MUJOCO_GL", "")
     try:
-        proc = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, timeout=TIMEOUT_S,
-                              env=os.environ.copy())
+        proc = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, timeout=TIMEOUT_S)
     except subprocess.TimeoutExpired:
         reason = f"drawing one frame took more than {TIMEOUT_S} s"
     else:
