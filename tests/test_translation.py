@@ -293,23 +293,29 @@ def test_hand_offset_is_learnt_with_g_and_only_when_asked_for(tiny):
         assert float(losses(*batch)["hand"]) < float(out["hand"])
 
 
-def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
-    """The translators of several seeds train as one stacked model; each member's G, D, kept checkpoint and curve are
-    the same bits as when that seed trains alone (its own demonstrations and held-out split, its own draws)."""
+def _stack_inputs(tiny, seeds):
+    """What a stack of translators trains on: the arms' kinematics, X's random motion, Y's states, and one member per
+    seed with its own six episodes per pairing and 30 % of them held out."""
     env, paths, dyn = tiny
-    kin = box_push_kinematics(env)
     random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
     y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_columns.state_columns("Y")]]
     y = y.to_numpy(np.float32).copy()
-    cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=10, select_every=10, batch_size=16,
-                           hand_offset=True, lambda_hand=1.0)
     members = []
-    for seed in (4, 7, 11):
+    for seed in seeds:
         eps = {p: np.unique(t.episode) for p, t in random_x.items()}
         pick = {p: t.subset(np.isin(t.episode, np.random.default_rng(seed).choice(eps[p], 6, replace=False)))
                 for p, t in random_x.items()}
         train, held = split_held_out(pick, 0.3, seed)
         members.append(Member(train, seed, held))
+    return box_push_kinematics(env), random_x, y, dyn, members
+
+
+def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
+    """The translators of several seeds train as one stacked model; each member's G, D, kept checkpoint and curve are
+    the same bits as when that seed trains alone (its own demonstrations and held-out split, its own draws)."""
+    kin, random_x, y, dyn, members = _stack_inputs(tiny, (4, 7, 11))
+    cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=10, select_every=10, batch_size=16,
+                           hand_offset=True, lambda_hand=1.0)
     stacked, st_stats = train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
     for k, m in enumerate(members):
         alone, stats = train_translator(m.demos, random_x, y, dyn, cfg, m.seed, tl=TL, kinematics=kin,
@@ -332,21 +338,10 @@ def test_a_killed_training_resumes_from_its_checkpoint_to_the_same_bits(tiny, tm
     and ends with the same G, D, kept G, curves and selection as a run never stopped: optimiser moments, random
     draws, past fakes, partial averages and the decaying learning rate all come back. A checkpoint of another run
     (another seed) is not used, a damaged one is ignored, and a finished run found again trains no iteration."""
-    env, paths, dyn = tiny
-    kin = box_push_kinematics(env)
-    random_x = {p: load_x_transitions(paths[p], p, kind="random", tl=TL) for p in layout.PAIRINGS}
-    y = data.read_transitions(paths["Y"])[[f"state.{c}" for c in box_columns.state_columns("Y")]]
-    y = y.to_numpy(np.float32).copy()
+    kin, random_x, y, dyn, members = _stack_inputs(tiny, (4, 7))
     # log_every 3 and select_every 10: checkpoints fall between two logs (partial averages are saved)
     cfg = TranslatorConfig(iterations=40, hidden=[32, 32], log_every=3, select_every=10, batch_size=16,
                            history_size=8, lr_decay="cosine")
-    members = []
-    for seed in (4, 7):
-        eps = {p: np.unique(t.episode) for p, t in random_x.items()}
-        pick = {p: t.subset(np.isin(t.episode, np.random.default_rng(seed).choice(eps[p], 6, replace=False)))
-                for p, t in random_x.items()}
-        train, held = split_held_out(pick, 0.3, seed)
-        members.append(Member(train, seed, held))
 
     def run(ckpt=None, logs=None):
         return train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin, checkpoint_dir=ckpt,
