@@ -67,9 +67,24 @@ def workspace_root() -> Path:
     return root
 
 
+URI_CHANGES = {"?": "starts a query string", "%": "starts an escape such as %20"}
+"""Characters of a folder's path that a sqlite URI cannot carry as they are: SQLAlchemy reads them as URI syntax, so
+the store would be another file (and MLflow would make a folder of the path as written)."""
+
+
 def tracking_uri() -> str:
-    """``MLFLOW_TRACKING_URI`` if set, else an absolute sqlite URI of ``<workspace>/mlflow.db``."""
-    return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{workspace_root() / 'mlflow.db'}"
+    """``MLFLOW_TRACKING_URI`` if set, else an absolute sqlite URI of ``<workspace>/mlflow.db``; a workspace whose
+    path holds a character of :data:`URI_CHANGES` raises TrackingUnavailable naming the folder."""
+    if os.environ.get("MLFLOW_TRACKING_URI"):
+        return os.environ["MLFLOW_TRACKING_URI"]
+    root = workspace_root()
+    for char, why in URI_CHANGES.items():
+        if char in str(root):
+            raise TrackingUnavailable(
+                f"the project folder {root} has {char!r} in its path, which the default tracking store's URI "
+                f"sqlite:///{root / 'mlflow.db'} cannot carry ({char!r} {why}): move the project to a folder "
+                "without it, or set MLFLOW_TRACKING_URI=sqlite:////another/folder/mlflow.db")
+    return f"sqlite:///{root / 'mlflow.db'}"
 
 
 class TrackingUnavailable(InputError):
@@ -144,14 +159,19 @@ def _check_server(uri: str, timeout: float) -> None:
                         error=TrackingUnavailable)
 
 
+def _sqlite_path(uri: str) -> Path:
+    """The database file of ``sqlite:///rel`` or ``sqlite:////abs``, %20 and the like decoded as SQLAlchemy reads
+    them ('.' for an in-memory store)."""
+    from urllib.parse import unquote
+
+    return Path(unquote(uri.split("://", 1)[1][1:]) or ".")
+
+
 def _check_sqlite(uri: str, thorough: bool = False) -> None:
     if "?" in uri:
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: a query string is not supported (MLflow would open "
                                   "another, empty store); give the database's path alone, sqlite:////path/mlflow.db")
-    from urllib.parse import unquote
-
-    # sqlite:///rel and sqlite:////abs; %20 and the like decoded, as SQLAlchemy reads them
-    path = Path(unquote(uri.split("://", 1)[1][1:]) or ".")
+    path = _sqlite_path(uri)
     if str(path) in (".", ":memory:"):
         raise TrackingUnavailable(f"MLFLOW_TRACKING_URI={uri}: an in-memory store keeps no run; give a file, "
                                   "sqlite:////path/mlflow.db")
@@ -293,14 +313,28 @@ def _first_query(uri: str, name: str):
                                   f"({type(err).__name__}: {first})") from err
 
 
+def _active(uri: str, client, exp):
+    """``(client, exp)`` unless the experiment is deleted (in MLflow's UI, say): MLflow refuses every run in it, so
+    TrackingUnavailable names it and the three ways on."""
+    if exp is not None and exp.lifecycle_stage == "deleted":
+        store = f"MLFLOW_TRACKING_URI={redact(uri)}"
+        raise TrackingUnavailable(
+            f"the MLflow experiment {exp.name!r} ({EXPERIMENT_ENV}, default {DEFAULT_EXPERIMENT!r}) in {store} is "
+            f"deleted (id {exp.experiment_id}), and MLflow logs no run to it: restore it with `{store} mlflow "
+            f"experiments restore --experiment-id {exp.experiment_id}`, remove it for good with `{store} mlflow "
+            f"gc --experiment-ids {exp.experiment_id}`, or log to another with "
+            f"{EXPERIMENT_ENV}=<name>")
+    return client, exp
+
+
 def check_store_answers(uri: str) -> None:
-    """Preflight's check of a tracking server or database server: it answers a read-only query (the experiment's
-    lookup), not only /health or a TCP connection. An SQLite file is checked whole by :func:`check_tracking_uri`
-    (``thorough``) instead. No experiment or run is created (an empty database gets MLflow's tables, as the first
-    stage would give it)."""
+    """Preflight's check of a tracking store: it answers a read-only query (the experiment's lookup), not only
+    /health or a TCP connection, and the experiment, if it exists, is not deleted (:func:`_active`). A new SQLite
+    store (no file yet) has no experiment to look up. No experiment or run is created (an empty database gets
+    MLflow's tables, as the first stage would give it)."""
     base = _scheme(uri).split("+")[0]
-    if base in ("http", "https") or base in DB_SCHEMES:
-        _first_query(uri, experiment_name())
+    if base in ("http", "https") or base in DB_SCHEMES or (base == "sqlite" and _sqlite_path(uri).is_file()):
+        _active(uri, *_first_query(uri, experiment_name()))
 
 
 def experiment_id(name: str | None = None) -> str:
@@ -315,7 +349,7 @@ def experiment_id(name: str | None = None) -> str:
     lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
-        client, exp = _first_query(uri, name)
+        client, exp = _active(uri, *_first_query(uri, name))
         if exp is None:
             # a local store keeps artifacts beside the database, whatever directory a stage runs from
             artifacts = (Path(lock.parent) / "mlartifacts").as_uri() if lock else None

@@ -1,5 +1,6 @@
 """Hostile services, variables and addresses (issue 38): a tracking server that answers 503, a model registry that is
-down, a sweep ``--address`` that is not Ray, an ``mlflow.db`` cut short, a too-long ``LFDT_MLFLOW_EXPERIMENT``,
+down, a sweep ``--address`` that is not Ray, an ``mlflow.db`` cut short, an experiment deleted in MLflow's UI, a
+project folder whose path a sqlite URI cannot carry, a too-long ``LFDT_MLFLOW_EXPERIMENT``,
 ``LFDT_NUMERICS=fast``, and observations `mlflow models predict` cannot act on. Each ends in exit code 2 and one
 line ``error: ...`` naming the URI, variable or file, within seconds, without a traceback. A new case is one row of
 :data:`CASES`.
@@ -128,6 +129,15 @@ def half_size_db(path: Path) -> Path:
     con.close()
     os.truncate(path, path.stat().st_size // 2)
     assert path.read_bytes()[:16] == b"SQLite format 3\x00"
+    return path
+
+
+def deleted_experiment_db(path: Path) -> Path:
+    """An MLflow store whose experiment 'lfdt' was deleted (as in MLflow's UI): MLflow refuses every run in it."""
+    import mlflow
+
+    client = mlflow.MlflowClient(f"sqlite:///{path}")
+    client.delete_experiment(client.create_experiment("lfdt"))
     return path
 
 
@@ -319,6 +329,18 @@ CASES = [
     ("experiment-too-long-views", views, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db",
                                           "LFDT_MLFLOW_EXPERIMENT": LONG_NAME}, [],
      ["LFDT_MLFLOW_EXPERIMENT is 600 characters long", "at most 256"]),
+    # the experiment deleted in MLflow's UI: before, MLflow's traceback at the first stage's run, after preflight
+    ("experiment-deleted", stage_start, {"MLFLOW_TRACKING_URI": "sqlite:///{deleteddb}"}, [],
+     ["experiment 'lfdt' (LFDT_MLFLOW_EXPERIMENT", "is deleted (id 1)", "mlflow experiments restore --experiment-id 1",
+      "mlflow gc --experiment-ids 1", "LFDT_MLFLOW_EXPERIMENT=<name>"]),
+    ("experiment-deleted-preflight", preflight, {"MLFLOW_TRACKING_URI": "sqlite:///{deleteddb}"}, [],
+     ["experiment 'lfdt' (LFDT_MLFLOW_EXPERIMENT", "is deleted (id 1)"]),
+    # a project cloned into a folder whose path a sqlite URI reads as syntax: before, an error about a
+    # MLFLOW_TRACKING_URI nobody set ('?'), or about a folder that does not exist ('%20' read as a space)
+    ("workspace-path-query", stage_start, {"DVC_ROOT": "{tmp}/lfdt?2"}, [],
+     ["the project folder {tmp}/lfdt?2 has '?'", "starts a query string", "MLFLOW_TRACKING_URI=sqlite:////"]),
+    ("workspace-path-percent-preflight", preflight, {"DVC_ROOT": "{tmp}/100%20done"}, [],
+     ["the project folder {tmp}/100%20done has '%'", "starts an escape"]),
     ("ui-port-taken", views, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db"},
      ["--port-free", "--ui", "http://{http503}"], ["{http503} is in use", "make mlflow-ui UI_PORT="]),
     ("experiment-newline", stage_start, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db",
@@ -349,6 +371,8 @@ def test_a_hostile_service_or_variable_is_one_named_error_within_seconds(tmp_pat
     keys = {**addresses, "tmp": str(tmp_path)}
     if any("{halfdb}" in v for v in env.values()):
         keys["halfdb"] = str(half_size_db(tmp_path / "mlflow.db"))
+    if any("{deleteddb}" in v for v in env.values()):
+        keys["deleteddb"] = str(deleted_experiment_db(tmp_path / "mlflow.db"))
     for name in ("MLFLOW_TRACKING_URI", "MLFLOW_REGISTRY_URI", "LFDT_MLFLOW_EXPERIMENT", "RAY_ADDRESS", "DVC_STAGE",
                  "DVC_ROOT", "LFDT_NUMERICS", *(k for k in os.environ if k.startswith("MLFLOW_HTTP_REQUEST"))):
         monkeypatch.delenv(name, raising=False)
