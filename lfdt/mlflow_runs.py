@@ -518,16 +518,27 @@ def require_runs(run_ids: list[str], what: str) -> list[str]:
 
     client = mlflow.MlflowClient()
     ids = list(dict.fromkeys(run_ids))
-    missing = []
+    missing, deleted = [], []
     for rid in ids:
         try:
-            _retry(lambda r=rid: client.get_run(r))
+            run = _retry(lambda r=rid: client.get_run(r))
         except MlflowException:
             missing.append(rid)
+            continue
+        if run.info.lifecycle_stage == "deleted":  # in MLflow's UI: MLflow then refuses every tag set on it
+            deleted.append(run)
+    uri = tracking_uri()
     if missing:
         raise RunNotFound(f"{len(missing)} of the {len(ids)} runs {what} are not in the tracking store "
-                          f"{tracking_uri()} (first: {missing[0]}): the stages that logged them wrote to another "
+                          f"{redact(uri)} (first: {missing[0]}): the stages that logged them wrote to another "
                           f"store; rerun them here (`dvc repro -f <stage>`), or point MLFLOW_TRACKING_URI at theirs")
+    if deleted:
+        first = deleted[0]
+        stage = first.data.tags.get("lfdt.stage", "?")
+        raise RunNotFound(f"{len(deleted)} of the {len(ids)} runs {what} were deleted in MLflow (first: "
+                          f"{first.info.run_id}, '{first.info.run_name}' of stage {stage}): restore each with "
+                          f"`MLFLOW_TRACKING_URI={redact(uri)} mlflow runs restore --run-id <id>`, or rerun the "
+                          f"stages that logged them (`dvc repro -f -s <stage>`)")
     return ids
 
 

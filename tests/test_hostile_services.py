@@ -188,6 +188,26 @@ def stage_start(ctx: Ctx) -> int | None:
     return 0
 
 
+def report_adopts(ctx: Ctx) -> int | None:
+    """What the report stages do with the runs behind a table (lfdt.mlflow_runs.adopt_children), after one of them was
+    deleted in MLflow's UI."""
+    import mlflow
+
+    from lfdt import mlflow_runs, stage
+
+    def run() -> None:
+        with mlflow_runs.stage_run("train_bc", {}, run_name="bc-d3-s0") as kept:
+            pass
+        with mlflow_runs.stage_run("train_bc", {}, run_name="bc-d3-s1") as gone:
+            pass
+        mlflow.MlflowClient().delete_run(gone.run_id)
+        with mlflow_runs.stage_run("report", {}) as parent:
+            mlflow_runs.adopt_children(parent.run_id, [kept.run_id, gone.run_id])
+
+    stage.main(run)
+    return 0
+
+
 def preflight(ctx: Ctx) -> int | None:
     """The preflight stage, as dvc.yaml runs it (the repository's params.yaml)."""
     argv = sys.argv
@@ -335,6 +355,10 @@ CASES = [
       "mlflow gc --experiment-ids 1", "LFDT_MLFLOW_EXPERIMENT=<name>"]),
     ("experiment-deleted-preflight", preflight, {"MLFLOW_TRACKING_URI": "sqlite:///{deleteddb}"}, [],
      ["experiment 'lfdt' (LFDT_MLFLOW_EXPERIMENT", "is deleted (id 1)"]),
+    # a run behind Table I deleted in MLflow's UI: before, MLflow's traceback when the report adopted it
+    ("run-deleted-report", report_adopts, {"MLFLOW_TRACKING_URI": "sqlite:///{tmp}/mlflow.db"}, [],
+     ["1 of the 2 runs behind this report were deleted in MLflow", "'bc-d3-s1' of stage train_bc",
+      "mlflow runs restore --run-id", "dvc repro -f -s <stage>"]),
     # a project cloned into a folder whose path a sqlite URI reads as syntax: before, an error about a
     # MLFLOW_TRACKING_URI nobody set ('?'), or about a folder that does not exist ('%20' read as a space)
     ("workspace-path-query", stage_start, {"DVC_ROOT": "{tmp}/lfdt?2"}, [],
