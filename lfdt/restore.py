@@ -48,7 +48,8 @@ class Restored:
     from_git: list[str] = field(default_factory=list)
     """``cache: false`` outputs written from the last commit, whose version there is the one ``dvc.lock`` names."""
     missing: list[str] = field(default_factory=list)
-    """``cache: false`` outputs absent from the workspace whose copy neither the cache nor the last commit holds."""
+    """Outputs absent from the workspace that cannot be brought back: a cached one whose object DVC's cache lacks, a
+    ``cache: false`` one whose copy neither the cache nor the last commit holds."""
     stages: dict[str, str] = field(default_factory=dict)
     """The stage of each missing output."""
     why: dict[str, str] = field(default_factory=dict)
@@ -139,7 +140,7 @@ def restore(root: str | Path, stages: list[str] | None = None, force: bool = Fal
 
 def _restore_locked(repo, root: Path, locked: dict, names: list[str], stages: list[str] | None, force: bool,
                     done: Restored) -> None:
-    from dvc.exceptions import DvcException
+    from dvc.exceptions import CheckoutError, DvcException
 
     index = repo.index.stages
     defined = {s.name for s in index}
@@ -154,10 +155,19 @@ def _restore_locked(repo, root: Path, locked: dict, names: list[str], stages: li
         try:
             with _quiet_dvc():
                 stats = repo.checkout(targets=cached, force=force)
-            done.checked_out = sorted(str(p) for p in stats.get("added", []) + stats.get("modified", []))
-        except DvcException as e:  # a failing stage's half-written files in a cached output, an object not cached
+        except CheckoutError as e:  # outputs whose objects DVC's cache does not hold; the others are checked out
+            stats = e.result
+            owner = {o["path"]: n for n in cached for o in locked[n].get("outs", [])}
+            for path in e.target_infos:
+                done.missing.append(path)
+                done.stages[path] = owner.get(path, "?")
+                done.why[path] = ("a clone without `dvc pull`, `dvc gc` or a cleared cache; `dvc pull` brings it "
+                                  "from the project's DVC remote if it has one")
+        except DvcException as e:  # a failing stage's half-written files in a cached output
+            stats = {}
             done.checkout_error = (f"dvc checkout of {', '.join(cached[:3])}{', ...' if len(cached) > 3 else ''}: "
                                    f"{_message(e)}")
+        done.checked_out = sorted(str(p) for p in stats.get("added", []) + stats.get("modified", []))
     cache = repo.stage_cache
     for name in names:
         entry = locked[name]

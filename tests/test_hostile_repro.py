@@ -253,3 +253,27 @@ def test_restore_waits_for_no_running_repro(tmp_path):
     assert proc.returncode == 2 and not proc.stdout, proc.stdout + proc.stderr
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith(f"error: {tmp_path}: Unable to acquire lock"), \
         proc.stderr
+
+
+def test_restore_names_a_cached_output_dvc_s_cache_lacks(tmp_path):
+    """A cached output whose object DVC's cache no longer holds (a clone without `dvc pull`, `dvc gc`): restore brings
+    back the others and names it in one line, with `dvc pull` and the stage to rerun; exit 2. Before, DVC's "Is your
+    cache up to date?" came with advice to use ``--force``, which cannot help."""
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    smoke.dvc(["init", "-q"], tmp_path)
+    write = ("import pathlib, sys; pathlib.Path(sys.argv[1]).mkdir(); "
+             "pathlib.Path(sys.argv[1], 'a.txt').write_text(sys.argv[1])")
+    (tmp_path / "dvc.yaml").write_text(yaml.safe_dump({"stages": {
+        name: {"cmd": f'python -c "{write}" {name}', "outs": [name]} for name in ("kept", "gone")}}))
+    smoke.dvc(["repro", "-q"], tmp_path)
+    gone_hash = yaml.safe_load((tmp_path / "dvc.lock").read_text())["stages"]["gone"]["outs"][0]["md5"]
+    for name in ("kept", "gone"):
+        shutil.rmtree(tmp_path / name)
+    (tmp_path / ".dvc/cache/files/md5" / gone_hash[:2] / gone_hash[2:]).unlink()
+    proc = subprocess.run([sys.executable, "-m", "lfdt.restore", "--root", str(tmp_path)], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert (tmp_path / "kept/a.txt").read_text() == "kept" and "checked out  kept" in proc.stdout, proc.stdout
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: gone: not in the workspace"), proc.stderr
+    assert "`dvc pull`" in proc.stderr and "`dvc repro -s gone`" in proc.stderr, proc.stderr
+    assert "--force" not in proc.stderr, proc.stderr
