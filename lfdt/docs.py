@@ -129,7 +129,8 @@ def cross_cpu(root: Path) -> str:
     libs = ", ".join(f"{k} {v}" for k, v in sorted(fp["versions"].items()))
     compared = sorted({k for r in doc["runs"] for k in r["matches_committed"]})
     later = sorted(set(fp["components"]) - set(compared))
-    lines += ["", f"Measured {doc['date']} with `python tools/cross_cpu.py` ({doc['qemu']}); components "
+    qemu = f" ({doc['qemu']})" if doc.get("qemu") else ""  # a run without emulated CPUs names no QEMU
+    lines += ["", f"Measured {doc['date']} with `python tools/cross_cpu.py`{qemu}; components "
               f"{', '.join(compared)}; libraries {libs}."
               + "".join(f" The rows dated {e['date']} ran on {e['host_cpu_model']} against the fingerprint of then "
                         f"({len(e['committed'])} components: {', '.join(sorted(e['committed']))})."

@@ -140,6 +140,28 @@ def test_a_damaged_report_is_one_named_error_and_no_page_changes(tmp_path: Path,
     assert (tmp_path / "README.md").read_text() == PAGE
 
 
+def test_a_cross_cpu_report_without_emulated_cpus_names_no_qemu(tmp_path: Path):
+    """`tools/cross_cpu.py --models` with none (this CPU only, on a machine without QEMU) writes no QEMU version: the
+    block says which tool measured it, without a '(None)'."""
+    import json
+
+    (tmp_path / "reports").mkdir()
+    comps = {"bc": "1", "sac": "2"}
+    fingerprint = {"components": comps, "versions": {"torch": "x"}}
+    (tmp_path / "reports" / "fingerprint.json").write_text(json.dumps(fingerprint))
+    run = {"cpu": "AMD EPYC (avx512), native", "emulated_model": None, "numerics": "pinned", "components": comps,
+           "matches_committed": {"bc": True, "sac": True}, "all_match": True}
+    doc = {"date": "2026-12-07", "host_cpu_model": "AMD EPYC", "host_cpu_isa": "avx512", "qemu": None,
+           "committed": comps, "runs": [run], "earlier_hosts": []}
+    (tmp_path / "reports" / "cross_cpu.json").write_text(json.dumps(doc))
+    text = docs.cross_cpu(tmp_path)
+    assert "| AMD EPYC | AVX-512 | pinned | yes, all 2 components compared |" in text
+    assert "with `python tools/cross_cpu.py`; components bc, sac" in text and "None" not in text
+    doc["qemu"] = "qemu-x86_64 version 7.2.22"
+    (tmp_path / "reports" / "cross_cpu.json").write_text(json.dumps(doc))
+    assert "`python tools/cross_cpu.py` (qemu-x86_64 version 7.2.22); components" in docs.cross_cpu(tmp_path)
+
+
 def test_a_search_without_a_finished_trial_is_left_out_not_an_error(tmp_path: Path):
     """tools/dev_search.py writes its table's header before the first trial ends; `make docs` meanwhile goes on."""
     exp = tmp_path / "docs" / "experiments"
