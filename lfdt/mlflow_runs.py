@@ -346,7 +346,9 @@ def experiment_id(name: str | None = None) -> str:
     uri = tracking_uri()
     check_tracking_uri(uri)
     mlflow.set_tracking_uri(uri)
-    lock = Path(uri.removeprefix("sqlite:///") + ".lock") if uri.startswith("sqlite:///") else None
+    # beside the database file as SQLAlchemy opens it (%20 decoded): the artifacts' folder is the lock's
+    db = _sqlite_path(uri) if uri.startswith("sqlite:///") else None
+    lock = db.with_name(db.name + ".lock") if db else None
     ctx = _file_lock(lock) if lock else contextlib.nullcontext()
     with ctx:
         client, exp = _active(uri, *_first_query(uri, name))

@@ -176,6 +176,20 @@ def test_a_refused_duplicate_experiment_tag_is_fine_when_the_tag_holds(tmp_path,
         mlflow_runs.experiment_id("lfdt")
 
 
+def test_a_store_whose_path_has_a_percent_escape_keeps_its_lock_and_artifacts_beside_it(tmp_path, monkeypatch):
+    """``sqlite:///.../my%20dir/mlflow.db`` is a database in 'my dir' (SQLAlchemy decodes the path): the experiment's
+    lock and artifact folder sit there too, none of them in a folder 'my%20dir' (MLflow itself makes that one, empty,
+    as the database's parent before SQLAlchemy decodes the path)."""
+    (tmp_path / "my dir").mkdir()
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/my%20dir/mlflow.db")
+    exp = mlflow_runs.experiment_id("lfdt")
+    assert (tmp_path / "my dir" / "mlflow.db").is_file()
+    assert (tmp_path / "my dir" / "mlflow.db.lock").is_file()
+    location = mlflow.MlflowClient().get_experiment(exp).artifact_location
+    assert location == (tmp_path / "my dir" / "mlartifacts").as_uri()
+    assert not any((tmp_path / "my%20dir").glob("**/*"))
+
+
 class _Health(http.server.BaseHTTPRequestHandler):
     def do_GET(self):  # noqa: N802 - http.server's name
         self.send_response(200 if self.path == "/health" else 404)
