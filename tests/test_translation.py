@@ -13,6 +13,7 @@ from lfdt.methods import translator_config
 from lfdt.tasks.box_push import columns as box_columns
 from lfdt.tasks.box_push.env import replay_check
 from lfdt.tasks.box_push.random_motion import collect_random
+from lfdt.translation import training
 from lfdt.translation.apply import translator_diagnostics
 from lfdt.translation.losses import Losses, normalised
 from lfdt.translation.model import MeanTranslator, Translator, fit_x_normalizers
@@ -327,6 +328,42 @@ def test_a_seed_trains_to_the_same_bits_alone_and_in_a_stack(tiny):
         assert stats["selected_iteration"] == st_stats[k]["selected_iteration"]
     # and the members differ from each other (their seeds and data count)
     assert not torch.equal(stacked[0].G.layers[0].weight, stacked[1].G.layers[0].weight)
+
+
+def test_a_zero_weight_sends_nothing_back_and_changes_no_bit(tiny, monkeypatch):
+    """lfdt_no_dyn (lambda_dyn = 0) trains without back-propagating through F and F^-1, to the same bits as the plain
+    sum of eq. 6 with its zero-weighted L_dyn."""
+    kin, random_x, y, dyn, members = _stack_inputs(tiny, (4, 7))
+    cfg = translator_config("lfdt_no_dyn", TranslatorConfig(iterations=30, hidden=[32, 32], log_every=10,
+                                                              select_every=10, batch_size=16))
+    backward_into_f = []
+    plain_forward = dyn.forward_model
+
+    def watched(y_n, a):
+        out = plain_forward(y_n, a)
+        if out.requires_grad:
+            out.register_hook(lambda g: backward_into_f.append(1))
+        return out
+
+    monkeypatch.setattr(dyn, "forward_model", watched)
+    skipped, skipped_stats = train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
+    assert not backward_into_f, "a zero-weighted L_dyn still sent its gradient back through F"
+    with pytest.raises(ValueError, match="every term of the translator's loss has weight 0"):
+        training.weighted_sum([(0.0, torch.ones(2)), (0, torch.ones(2))])
+
+    def plain_sum(terms):
+        total = terms[0][0] * terms[0][1]
+        for w, loss in terms[1:]:
+            total = total + w * loss
+        return total
+
+    monkeypatch.setattr(training, "weighted_sum", plain_sum)
+    plain, plain_stats = train_translators(members, random_x, y, dyn, cfg, tl=TL, kinematics=kin)
+    assert backward_into_f  # the watch works: the plain sum back-propagates 0 x L_dyn through F
+    for a, b, sa, sb in zip(skipped, plain, skipped_stats, plain_stats):
+        da, db = a.state_dict(), b.state_dict()
+        assert all(torch.equal(da[key], db[key]) for key in da)
+        assert sa["curve"] == sb["curve"] and sa["selected_iteration"] == sb["selected_iteration"]
 
 
 class _Killed(Exception):
