@@ -10,11 +10,15 @@ UI_PORT ?= 5000
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 14
 
+# pip writes the installed modules' bytecode file by file on one core; compileall writes the same on every core
+# (the one file torch keeps for Python 3.12 does not compile under 3.11: pip passes over it in silence)
 $(STAMP): requirements.txt pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -r requirements.txt
+	$(BIN)/pip install --quiet --no-compile -r requirements.txt
 	$(BIN)/pip install --quiet --no-deps -e .
+	$(BIN)/python -m compileall -q -j 0 -x 'py312_intrinsics\.py$$' \
+		"$$($(BIN)/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" >/dev/null
 	touch $(STAMP)
 
 setup: $(STAMP)  ## create .venv and install the pinned dependencies
