@@ -63,3 +63,19 @@ def test_a_failing_suite_fails_the_tool_and_each_worker_reports_as_itself(tmp_pa
     assert json.loads(out.read_text())["pytest_exit_code"] == 1
     raw = [json.loads(line) for line in out.with_suffix(".jsonl").read_text().splitlines()]
     assert {r["worker"] for r in raw} <= {"gw0", "gw1"} and len(raw) == 6
+
+
+def test_a_suite_shorter_than_a_sample_still_gets_its_busy_share():
+    """The sampler records the last, shorter interval when it is stopped: a suite that starts after one sample and
+    ends before the next (a loaded machine's slow start) still has a busy share (CI, 2026-12-08: it had none)."""
+    import threading
+    import time
+
+    tool = _tool()
+    busy, stop = [], threading.Event()
+    sampler = threading.Thread(target=tool._sample, args=(busy, stop), daemon=True)
+    sampler.start()
+    time.sleep(0.2)
+    stop.set()
+    sampler.join(timeout=5)
+    assert not sampler.is_alive() and len(busy) == 1 and 0.0 <= busy[0][1] <= 1.0

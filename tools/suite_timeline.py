@@ -66,11 +66,14 @@ def _cpu_times() -> tuple[int, int]:
 
 def _sample(out: list[tuple[float, float]], stop: threading.Event) -> None:
     busy0, total0 = _cpu_times()
-    while not stop.wait(SAMPLE_S):
+    while True:
+        stopped = stop.wait(SAMPLE_S)
         busy, total = _cpu_times()
         if total > total0:
             out.append((time.time(), (busy - busy0) / (total - total0)))
         busy0, total0 = busy, total
+        if stopped:  # the last, shorter interval too: a suite that ends between two samples still has its own
+            return
 
 
 def _cpu_model() -> str:
