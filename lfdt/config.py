@@ -404,11 +404,11 @@ class TranslatorConfig(Strict):
     lambda_adv: NonNegFloat = 1.0
     """Weight of the adversarial loss L_adv (eq. 1)."""
     lambda_dyn: NonNegFloat = 3.0
-    """Weight of the dynamics-consistency loss L_dyn (eq. 2); lfdt_no_dyn sets it to 0. Defaults 3, lambda_id 30
-    and learning rate 1e-3 (before: 10 / 100 / 3e-4): the budgeted search's weights on the paper's loss, confirmed
+    """Weight of the dynamics-consistency loss L_dyn (eq. 2); lfdt_no_dyn sets it to 0. The box push's 3, lambda_id
+    30 and learning rate 1e-3 (before: 10 / 100 / 3e-4): the budgeted search's weights on the paper's loss, confirmed
     on development seeds it did not use (docs/experiments.md, search and confirm blocks, 'side0')."""
     lambda_id: NonNegFloat = 30.0
-    """Weight of the partial identity loss L_id (eq. 5); lfdt_no_id sets it to 0 (see lambda_dyn)."""
+    """Weight of the partial identity loss L_id (eq. 5); lfdt_no_id sets it to 0 (the box push's 30: see lambda_dyn)."""
     lambda_hand: NonNegFloat = 0.0
     """Weight of a hand loss: the missing robot's end position against the human's hand position (the same world
     frame, as in the paper's real-robot state), in Y's normalised units. Not in the paper (0 = off)."""
@@ -419,7 +419,7 @@ class TranslatorConfig(Strict):
     hidden: list[PosInt] = Field(default=[256, 256], min_length=1)
     """Hidden layers of G and D ('3 fully connected layers' = 2 hidden + output)."""
     learning_rate: PosFloat = 1e-3
-    """Adam learning rate of G and D (the paper: 3e-4; the default 1e-3: see lambda_dyn)."""
+    """Adam learning rate of G and D (the paper: 3e-4; the box push's 1e-3: see lambda_dyn)."""
     batch_size: Annotated[int, Field(ge=4)] = 128
     """Minibatch: half demonstration transitions, half X random transitions, both pairings in each half (the paper:
     32; 128 made translations that BC could use more often on the development start states: README)."""
